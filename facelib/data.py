@@ -1,0 +1,367 @@
+"""Synthetic datasets: generation, cache with checksums, splits (paper §4, DESIGN.md).
+
+``load_dataset("coma" | "bu", "train" | "test" | "all", num_frames=40)`` returns a
+:class:`FaceDataset` of landmark sequences (n, F, 68, 3) float32 in mm with integer labels,
+N2E/E2N kinds and subject ids; each subject's neutral mesh and every frame's mesh are
+available on demand.  Datasets are generated deterministically on first use and cached under
+``data/synthetic/cache`` (the file name carries a hash of the generator's source and
+configuration, so a changed generator never reuses a stale cache).  Each cache file has a
+sha256 sidecar; a file whose checksum does not match is rebuilt with a warning.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import tempfile
+import warnings
+from dataclasses import asdict, dataclass, field
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+from . import config
+from .face import aus, expressions, sequences
+from .face.aus import AU_NAMES, Face
+from .face.expressions import BU_LABELS, COMA_LABELS, KIND_NAMES
+from .face.identity import IDENTITY_MODES, sample_identity
+from .face.sequences import Timing, check_num_frames
+
+LABEL_SETS = {"coma": COMA_LABELS, "bu": BU_LABELS}
+TIMING = Timing()
+APEX_SCALE = (0.75, 1.1)  # our choice: per-take variation of the whole expression's intensity
+_SOURCE_FILES = ("face/template.py", "face/identity.py", "face/aus.py", "face/expressions.py",
+                 "face/sequences.py", "data.py", "config.py")
+
+
+def check_dataset_name(name):
+    if name not in config.DATASETS:
+        raise ValueError(f"unknown dataset {name!r}; allowed: {', '.join(config.DATASETS)}")
+    return config.DATASETS[name]
+
+
+def check_split(split):
+    if split not in config.SPLITS:
+        raise ValueError(f"unknown split {split!r}; allowed: {', '.join(config.SPLITS)}")
+    return split
+
+
+def _check_length(num_frames):
+    """An int (fixed length) or a (low, high) pair (each sequence's length uniform in it)."""
+    if isinstance(num_frames, (tuple, list)):
+        if len(num_frames) != 2:
+            raise ValueError(f"a variable length must be a (low, high) pair, got {num_frames!r}")
+        lo, hi = (check_num_frames(v) for v in num_frames)
+        if lo > hi:
+            raise ValueError(f"variable length range has low > high: {num_frames!r}")
+        return (lo, hi)
+    return check_num_frames(num_frames)
+
+
+def generator_fingerprint(spec, num_frames):
+    """Hash of everything that determines a dataset: spec, length, timing and generator source."""
+    h = hashlib.sha256()
+    h.update(json.dumps([asdict(spec), num_frames, asdict(TIMING), APEX_SCALE], sort_keys=True).encode())
+    root = Path(__file__).parent
+    for rel in _SOURCE_FILES:
+        h.update((root / rel).read_bytes())
+    return h.hexdigest()[:12]
+
+
+def _sequence_plan(spec):
+    """(subject, label, take, kind) of every sequence, in a fixed order."""
+    labels = LABEL_SETS[spec.label_set]
+    pairs = [(s, l) for s in range(spec.num_subjects) for l in range(len(labels))]
+    base = len(pairs) * spec.takes_per_pair
+    extra = spec.num_sequences - base
+    if not 0 <= extra <= len(pairs):
+        raise ValueError(f"dataset {spec.name}: cannot make {spec.num_sequences} sequences from "
+                         f"{len(pairs)} pairs x {spec.takes_per_pair} takes")
+    rng = np.random.default_rng([spec.seed, 99])
+    extra_pairs = set(rng.choice(len(pairs), size=extra, replace=False).tolist())
+    plan = []
+    for p, (s, l) in enumerate(pairs):
+        takes = spec.takes_per_pair + (p in extra_pairs)
+        for take in range(takes):
+            kind = take % 2 if take < spec.takes_per_pair else int(rng.integers(2))
+            plan.append((s, l, take, kind))
+    return plan
+
+
+def identity_coefficients(spec):
+    """Identity coefficients (num_subjects, 14) of the subjects of a dataset."""
+    return np.stack([sample_identity(np.random.default_rng([spec.seed, 0, s])) for s in range(spec.num_subjects)])
+
+
+def test_subjects(spec):
+    """The subjects held out for the test split (sorted)."""
+    rng = np.random.default_rng([spec.seed, 7])
+    return np.sort(rng.permutation(spec.num_subjects)[:spec.num_test_subjects])
+
+
+def generate(spec, num_frames=40):
+    """Generate all sequences of a dataset (both splits) as a dict of arrays (deterministic)."""
+    num_frames = _check_length(num_frames)
+    labels = LABEL_SETS[spec.label_set]
+    coeffs = identity_coefficients(spec)
+    plan = _sequence_plan(spec)
+    lengths = np.array([num_frames if isinstance(num_frames, int) else
+                        int(np.random.default_rng([spec.seed, 5, s, l, t]).integers(num_frames[0], num_frames[1] + 1))
+                        for s, l, t, _ in plan])
+    fmax = int(lengths.max())
+    n = len(plan)
+    landmarks = np.zeros((n, fmax, 68, 3), np.float32)
+    weights = np.zeros((n, fmax, aus.NUM_AUS), np.float32)
+    spread = expressions.StyleSpread(spec.style_gain_sigma, spec.style_leak_probability, spec.style_leak_max,
+                                     spec.style_blend_max)
+    face, style = None, None
+    for i, (s, l, take, kind) in enumerate(plan):  # the plan is ordered by subject, then label
+        if face is None or i == 0 or plan[i - 1][0] != s:
+            face = Face(coeffs[s])
+        if take == 0:
+            style = expressions.sample_style(labels[l], np.random.default_rng([spec.seed, 1, s, l]),
+                                             spread, labels)
+        rng = np.random.default_rng([spec.seed, 2, s, l, take])
+        apex = expressions.apex_intensities(labels[l], style, rng, scale=rng.uniform(*APEX_SCALE))
+        w = sequences.au_curves(apex, KIND_NAMES[kind], int(lengths[i]), rng, TIMING)
+        landmarks[i, :len(w)] = face.landmarks(w) + TIMING.noise_mm * rng.standard_normal((len(w), 68, 3))
+        weights[i, :len(w)] = w
+    plan = np.array(plan)
+    return {
+        "landmarks": landmarks, "au_weights": weights, "lengths": lengths.astype(np.int64),
+        "subjects": plan[:, 0].astype(np.int64), "labels": plan[:, 1].astype(np.int64),
+        "takes": plan[:, 2].astype(np.int64), "kinds": plan[:, 3].astype(np.int8),
+        "identity_coeffs": coeffs, "test_subjects": test_subjects(spec),
+    }
+
+
+def _sha256(path):
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def _atomic_write(path, write):
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
+    os.close(fd)
+    try:
+        write(tmp)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+
+
+def cache_path(name, num_frames=40, cache_dir=None):
+    spec = check_dataset_name(name)
+    num_frames = _check_length(num_frames)
+    tag = f"F{num_frames}" if isinstance(num_frames, int) else f"F{num_frames[0]}-{num_frames[1]}"
+    return Path(cache_dir or config.cache_dir()) / f"{name}-{tag}-{generator_fingerprint(spec, num_frames)}.npz"
+
+
+def _read_verified(path):
+    """Arrays of a cache file if its checksum matches its sidecar; None (with a warning) if not."""
+    sidecar = path.with_suffix(".sha256")
+    if not path.exists():
+        return None
+    expected = sidecar.read_text().strip() if sidecar.exists() else None
+    actual = _sha256(path)
+    if expected != actual:
+        warnings.warn(f"cache file {path.name} is corrupted or incomplete (sha256 {actual[:12]} does not "
+                      f"match its checksum {str(expected)[:12]}); rebuilding it", RuntimeWarning, stacklevel=3)
+        return None
+    with np.load(path) as z:
+        return {k: z[k] for k in z.files}
+
+
+def build(name, num_frames=40, cache_dir=None, rebuild=False):
+    """Arrays of the whole dataset: read from the verified cache, or generated and cached."""
+    spec = check_dataset_name(name)
+    path = cache_path(name, num_frames, cache_dir)
+    arrays = None if rebuild else _read_verified(path)
+    if arrays is None:
+        arrays = generate(spec, _check_length(num_frames))
+        _atomic_write(path, lambda tmp: np.savez(open(tmp, "wb"), **arrays))
+        _atomic_write(path.with_suffix(".sha256"), lambda tmp: Path(tmp).write_text(_sha256(path) + "\n"))
+        _remove_stale(path)
+    return arrays
+
+
+def _remove_stale(path):
+    """Delete caches of the same dataset and length made by an older generator."""
+    prefix = path.stem.rsplit("-", 1)[0] + "-"
+    for old in path.parent.glob(prefix + "*"):
+        if old.stem != path.stem and old.suffix in (".npz", ".sha256") and old.stem.rsplit("-", 1)[0] + "-" == prefix:
+            old.unlink(missing_ok=True)
+
+
+@lru_cache(maxsize=256)
+def _face(coeffs_bytes):
+    return Face(np.frombuffer(coeffs_bytes, dtype=np.float64).copy())
+
+
+@dataclass
+class FaceDataset:
+    """Landmark sequences of one split of a synthetic dataset.
+
+    ``landmarks[i, :lengths[i]]`` is sequence i, (F, 68, 3) float32 in mm (with capture noise);
+    frames beyond ``lengths[i]`` (variable-length datasets only) are zero.  ``labels[i]`` indexes
+    ``label_names``; ``kinds[i]`` indexes ``KIND_NAMES`` ("N2E", "E2N"); ``subjects[i]`` is the
+    dataset's subject id (0 .. num_subjects-1), whose identity coefficients are
+    ``identity_coeffs[subjects[i]]``; ``au_weights[i]`` are the AU intensity curves that made it.
+    """
+
+    name: str
+    split: str
+    landmarks: np.ndarray
+    labels: np.ndarray
+    kinds: np.ndarray
+    subjects: np.ndarray
+    lengths: np.ndarray
+    au_weights: np.ndarray
+    identity_coeffs: np.ndarray
+    label_names: tuple
+    kind_names: tuple = KIND_NAMES
+    au_names: tuple = AU_NAMES
+    extra: dict = field(default_factory=dict, repr=False)
+
+    def __len__(self):
+        return len(self.labels)
+
+    def __repr__(self):
+        return (f"FaceDataset({self.name!r}, split={self.split!r}, n={len(self)}, "
+                f"frames={self.landmarks.shape[1]}, subjects={len(np.unique(self.subjects))}, "
+                f"labels={len(self.label_names)})")
+
+    @property
+    def num_frames(self):
+        return self.landmarks.shape[1]
+
+    @property
+    def faces(self):
+        """Triangles (K, 3) of every mesh of the world (fixed topology)."""
+        return aus.tpl.get_template().faces
+
+    def face(self, subject):
+        """The :class:`Face` (identity) of a subject of this dataset."""
+        if not 0 <= subject < len(self.identity_coeffs):
+            raise ValueError(f"subject must be in [0, {len(self.identity_coeffs)}), got {subject}")
+        return _face(np.ascontiguousarray(self.identity_coeffs[subject], dtype=np.float64).tobytes())
+
+    def neutral_mesh(self, subject):
+        """Neutral vertices (V, 3) in mm of a subject."""
+        return self.face(subject).neutral.astype(np.float32)
+
+    def neutral_landmarks(self, subject):
+        """The 68 neutral landmarks (68, 3) in mm of a subject (noise-free)."""
+        return self.face(subject).landmarks(np.zeros(aus.NUM_AUS)).astype(np.float32)
+
+    def meshes(self, i):
+        """Per-frame meshes (F, V, 3) float32 in mm of sequence i (noise-free; landmarks[i] adds noise)."""
+        if not 0 <= i < len(self):
+            raise ValueError(f"sequence index must be in [0, {len(self)}), got {i}")
+        w = self.au_weights[i, :self.lengths[i]].astype(np.float64)
+        return self.face(int(self.subjects[i])).expression(w).astype(np.float32)
+
+    def label_of(self, i):
+        return self.label_names[self.labels[i]]
+
+    def subset(self, mask, split=None):
+        """A new dataset with the sequences selected by a boolean mask or an index array."""
+        sel = np.asarray(mask)
+        return FaceDataset(self.name, split or self.split, self.landmarks[sel], self.labels[sel],
+                           self.kinds[sel], self.subjects[sel], self.lengths[sel], self.au_weights[sel],
+                           self.identity_coeffs, self.label_names, extra=self.extra)
+
+
+def load_dataset(name, split="train", num_frames=40, cache_dir=None, rebuild=False):
+    """Load (generating and caching on first use) a split of a synthetic dataset.
+
+    name: "coma" (12 CoMA-like labels, 12 subjects, 689 sequences) or "bu" (6 emotions,
+    101 subjects, 1212 sequences).  split: "train", "test" (held-out subjects) or "all".
+    num_frames: an int in [2, 400] (40 in the paper) or a (low, high) range for variable lengths.
+    """
+    spec = check_dataset_name(name)
+    check_split(split)
+    arrays = build(name, num_frames, cache_dir, rebuild)
+    held_out = np.isin(arrays["subjects"], arrays["test_subjects"])
+    sel = {"train": ~held_out, "test": held_out, "all": np.ones_like(held_out)}[split]
+    ds = FaceDataset(spec.name, "all", arrays["landmarks"], arrays["labels"], arrays["kinds"],
+                     arrays["subjects"], arrays["lengths"], arrays["au_weights"],
+                     arrays["identity_coeffs"], LABEL_SETS[spec.label_set],
+                     extra={"test_subjects": arrays["test_subjects"]})
+    return ds.subset(sel, split)
+
+
+def expression_split(dataset, held_out):
+    """(train, test) subsets of ``dataset`` where the test part holds the labels in ``held_out``."""
+    held_out = [held_out] if isinstance(held_out, str) else list(held_out)
+    for label in held_out:
+        if label not in dataset.label_names:
+            raise ValueError(f"unknown label {label!r} for dataset {dataset.name!r}; "
+                             f"allowed: {', '.join(dataset.label_names)}")
+    test = np.isin(dataset.labels, [dataset.label_names.index(l) for l in held_out])
+    return dataset.subset(~test, "expression-train"), dataset.subset(test, "expression-test")
+
+
+def fingerprint(arrays):
+    """A summary that identifies a dataset: exact hash of its integer metadata, landmark statistics."""
+    meta = hashlib.sha256()
+    for k in ("labels", "kinds", "subjects", "takes", "lengths", "test_subjects"):
+        meta.update(np.ascontiguousarray(arrays[k]).astype(np.int64).tobytes())
+    lm = arrays["landmarks"].astype(np.float64)
+    return {
+        "num_sequences": int(len(arrays["labels"])),
+        "metadata_sha256": meta.hexdigest(),
+        "landmark_mean_mm": round(float(lm.mean()), 4),
+        "landmark_std_mm": round(float(lm.std()), 4),
+        "landmark_abs_mean_mm": round(float(np.abs(lm).mean()), 4),
+    }
+
+
+FINGERPRINT_FILE = config.SYNTHETIC_DIR / "fingerprints.json"
+CONFIG_FILE = config.SYNTHETIC_DIR / "config.json"
+
+
+def generator_config():
+    """The configuration of every dataset as plain data (written to data/synthetic/config.json)."""
+    return {"datasets": {n: asdict(s) for n, s in config.DATASETS.items()},
+            "label_sets": {k: list(v) for k, v in LABEL_SETS.items()}, "timing": asdict(TIMING),
+            "apex_scale": list(APEX_SCALE), "action_units": list(AU_NAMES),
+            "identity_modes": list(IDENTITY_MODES)}
+
+
+def summary(name, arrays):
+    """A printable summary of a whole dataset: counts per split, label, kind, subject; value ranges."""
+    spec = check_dataset_name(name)
+    labels = LABEL_SETS[spec.label_set]
+    held_out = np.isin(arrays["subjects"], arrays["test_subjects"])
+    lm = arrays["landmarks"]
+    lines = [f"dataset {name!r}: {len(arrays['labels'])} sequences, {spec.num_subjects} subjects "
+             f"({int((~held_out).sum())} train / {int(held_out.sum())} test sequences; test subjects "
+             f"{arrays['test_subjects'].tolist()}), frames {int(arrays['lengths'].min())}-{int(arrays['lengths'].max())}",
+             f"{'label':<14}{'N2E':>6}{'E2N':>6}{'train':>7}{'test':>6}"]
+    for k, label in enumerate(labels):
+        m = arrays["labels"] == k
+        lines.append(f"{label:<14}{int((m & (arrays['kinds'] == 0)).sum()):>6}{int((m & (arrays['kinds'] == 1)).sum()):>6}"
+                     f"{int((m & ~held_out).sum()):>7}{int((m & held_out).sum()):>6}")
+    per_subject = np.bincount(arrays["subjects"], minlength=spec.num_subjects)
+    lines.append(f"sequences per subject: min {per_subject.min()}, max {per_subject.max()}")
+    for axis, name_ in enumerate("xyz"):
+        v = lm[..., axis]
+        lines.append(f"{name_} range: {v.min():8.2f} .. {v.max():8.2f} mm")
+    w = arrays["au_weights"]
+    lines.append(f"AU intensities: {w.min():.2f} .. {w.max():.2f}")
+    return "\n".join(lines)
+
+
+def fingerprints_match(actual, expected, tolerance_mm=1e-3):
+    """True if two fingerprints agree: exact metadata, landmark statistics within ``tolerance_mm``."""
+    if actual["metadata_sha256"] != expected["metadata_sha256"] or actual["num_sequences"] != expected["num_sequences"]:
+        return False
+    keys = [k for k in expected if k.endswith("_mm")]
+    return all(abs(actual[k] - expected[k]) <= tolerance_mm for k in keys)

@@ -1,0 +1,96 @@
+"""The independent classifier (IC) of the paper's evaluation (§5): one LSTM layer + a linear layer.
+
+The IC reads a landmark sequence (B, F, 68, 3) in mm and predicts its label.  By default it
+looks at *motion*: each sequence minus its own mean shape over the frames.  Our choice, and a
+measured one (chapter 01): with only 9 training subjects, an LSTM on raw coordinates memorises
+the anatomy of those subjects and fails on new ones; removing the sequence's mean shape keeps
+everything about the expression (including N2E vs E2N order) and drops the anatomy.
+``inputs="absolute"`` gives the raw-coordinate variant for comparison.
+"""
+from __future__ import annotations
+
+import numpy as np
+import torch
+from torch import nn
+from tqdm.auto import tqdm
+
+INPUTS = ("motion", "absolute")
+
+
+class LSTMClassifier(nn.Module):
+    """One LSTM layer over frames + a linear layer on its last hidden state (paper §5, as in [62])."""
+
+    def __init__(self, num_classes, hidden=128, num_landmarks=68, inputs="motion"):
+        super().__init__()
+        if inputs not in INPUTS:
+            raise ValueError(f"inputs must be one of {INPUTS}, got {inputs!r}")
+        self.inputs = inputs
+        self.lstm = nn.LSTM(num_landmarks * 3, hidden, batch_first=True)
+        self.linear = nn.Linear(hidden, num_classes)
+        # Input standardisation, set from the training data by ``fit_normalization``.
+        self.register_buffer("offset", torch.zeros(num_landmarks * 3))
+        self.register_buffer("scale", torch.ones(()))
+
+    def _prepare(self, x):
+        if x.ndim != 4 or x.shape[-2:] != (self.lstm.input_size // 3, 3):
+            raise ValueError(f"expected landmark sequences (B, F, {self.lstm.input_size // 3}, 3), got {tuple(x.shape)}")
+        x = x.flatten(2)
+        if self.inputs == "motion":
+            x = x - x.mean(dim=1, keepdim=True)
+        return (x - self.offset) / self.scale
+
+    @torch.no_grad()
+    def fit_normalization(self, x):
+        """Set the input offset and scale from training sequences (B, F, 68, 3)."""
+        self.offset.zero_()
+        self.scale.fill_(1.0)
+        z = self._prepare(torch.as_tensor(x, dtype=torch.float32))
+        self.offset.copy_(z.mean(dim=(0, 1)))
+        self.scale.fill_(float((z - self.offset).std()))
+
+    def features(self, x):
+        """Last hidden state of the LSTM (B, hidden)."""
+        _, (h, _) = self.lstm(self._prepare(x))
+        return h[-1]
+
+    def forward(self, x):
+        """Class logits (B, num_classes): the output of the linear layer."""
+        return self.linear(self.features(x))
+
+    @torch.no_grad()
+    def predict(self, x, batch_size=256):
+        """Predicted classes (n,) for sequences given as a numpy array or tensor (n, F, 68, 3)."""
+        self.eval()
+        x = torch.as_tensor(np.asarray(x), dtype=torch.float32)
+        return torch.cat([self.forward(x[i:i + batch_size]).argmax(1) for i in range(0, len(x), batch_size)]).numpy()
+
+
+def train_classifier(landmarks, targets, num_classes, epochs=30, batch_size=32, lr=1e-3, seed=0,
+                     inputs="motion", hidden=128, progress=True):
+    """Train an :class:`LSTMClassifier` with Adam and cross-entropy; returns (model, loss per epoch)."""
+    x = torch.as_tensor(np.asarray(landmarks), dtype=torch.float32)
+    y = torch.as_tensor(np.asarray(targets), dtype=torch.long)
+    if len(x) != len(y):
+        raise ValueError(f"{len(x)} sequences but {len(y)} targets")
+    if y.min() < 0 or y.max() >= num_classes:
+        raise ValueError(f"targets must be in [0, {num_classes}), got range [{int(y.min())}, {int(y.max())}]")
+    torch.manual_seed(seed)
+    gen = torch.Generator().manual_seed(seed)
+    model = LSTMClassifier(num_classes, hidden=hidden, num_landmarks=x.shape[2], inputs=inputs)
+    model.fit_normalization(x)
+    opt = torch.optim.Adam(model.parameters(), lr=lr)
+    losses = []
+    for _ in tqdm(range(epochs), desc="train IC", disable=not progress):
+        model.train()
+        perm = torch.randperm(len(x), generator=gen)
+        total = 0.0
+        for i in range(0, len(x), batch_size):
+            b = perm[i:i + batch_size]
+            loss = nn.functional.cross_entropy(model(x[b]), y[b])
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            total += loss.item() * len(b)
+        losses.append(total / len(x))
+    model.eval()
+    return model, np.array(losses)

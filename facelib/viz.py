@@ -1,0 +1,231 @@
+"""Pictures of the book: matplotlib plots and animations, pyvista off-screen face renders.
+
+One style for the whole book (:func:`set_style`), one camera and lighting for every face render
+(front view, so faces are comparable across chapters), landmark plots with the iBUG-68
+contours, and animations as small looping GIFs embedded in the page.
+"""
+from __future__ import annotations
+
+import base64
+import inspect
+import io
+import os
+
+import numpy as np
+
+os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")  # off-screen, no X
+
+import matplotlib.pyplot as plt  # noqa: E402
+
+from .face import template as tpl  # noqa: E402  (the module)
+
+# iBUG-68 contours: (first, last, closed)
+CONTOURS = ((0, 16, False), (17, 21, False), (22, 26, False), (27, 30, False), (31, 35, False),
+            (36, 41, True), (42, 47, True), (48, 59, True), (60, 67, True))
+VIEWS = {  # camera position, focal point, up: front and three-quarter
+    "front": [(0.0, -2.0, 470.0), (0.0, -2.0, 0.0), (0.0, 1.0, 0.0)],
+    "three_quarter": [(330.0, 30.0, 450.0), (0.0, -2.0, 0.0), (0.0, 1.0, 0.0)],
+    "side": [(560.0, -2.0, 0.0), (0.0, -2.0, 0.0), (0.0, 1.0, 0.0)],
+}
+
+
+def set_style():
+    """The book's matplotlib style (call once per notebook)."""
+    plt.rcParams.update({
+        "figure.dpi": 100, "savefig.dpi": 100, "font.size": 10, "axes.titlesize": 10,
+        "axes.grid": True, "grid.alpha": 0.3, "axes.spines.top": False, "axes.spines.right": False,
+        "image.cmap": "viridis", "legend.frameon": False,
+    })
+
+
+def show_source(obj):
+    """Display the source code of a facelib function or class in the notebook."""
+    from IPython.display import Markdown, display
+    display(Markdown(f"```python\n{inspect.getsource(obj).rstrip()}\n```"))
+
+
+class FaceRenderer:
+    """Off-screen pyvista renderer with the book's fixed camera and lights.
+
+    ``render(vertices)`` returns an RGB image (H, W, 3) uint8.  Colour comes from the template's
+    albedo, or from per-vertex ``scalars`` mapped through ``cmap`` within ``clim`` (e.g. an
+    error in mm).  Reuse one renderer for many frames: only the vertex positions change.
+    """
+
+    def __init__(self, size=(320, 400), view="front", faces=None, zoom=1.0):
+        import pyvista as pv
+        self._pv = pv
+        self.size, self.view, self.zoom = size, view, zoom
+        self.faces = tpl.get_template().faces if faces is None else np.asarray(faces)
+        self._plotter = None
+        self._key = None
+
+    def _setup(self, vertices, colors, scalars, cmap, clim, landmarks):
+        pv = self._pv
+        faces = np.hstack([np.full((len(self.faces), 1), 3), self.faces]).ravel()
+        self.mesh = pv.PolyData(np.asarray(vertices, float), faces)
+        p = pv.Plotter(off_screen=True, window_size=self.size, lighting="none")
+        kw = dict(smooth_shading=True, specular=0.15, specular_power=15, diffuse=0.8, ambient=0.28)
+        if scalars is not None:
+            self.mesh["scalars"] = np.asarray(scalars, float)
+            self.actor = p.add_mesh(self.mesh, scalars="scalars", cmap=cmap, clim=clim, show_scalar_bar=False, **kw)
+        else:
+            rgb = tpl.get_template().colors if colors is None else np.asarray(colors)
+            self.mesh["rgb"] = (np.clip(rgb, 0, 1) * 255).astype(np.uint8)
+            self.actor = p.add_mesh(self.mesh, scalars="rgb", rgb=True, **kw)
+        if landmarks is not None:
+            self.points_actor = p.add_mesh(pv.PolyData(np.asarray(landmarks, float)), color="#1f77b4",
+                                           point_size=7, render_points_as_spheres=True)
+        p.add_light(pv.Light(position=(-180, 220, 420), focal_point=(0, 0, 0), intensity=0.85))
+        p.add_light(pv.Light(position=(260, -60, 320), focal_point=(0, 0, 0), intensity=0.35))
+        p.add_light(pv.Light(position=(0, 0, 600), focal_point=(0, 0, 0), intensity=0.15))
+        p.set_background("white")
+        p.camera_position = VIEWS[self.view]
+        p.camera.view_angle = 30.0 / self.zoom
+        self._plotter = p
+
+    def render(self, vertices, colors=None, scalars=None, cmap="magma_r", clim=None, landmarks=None):
+        key = (colors is None, scalars is None, cmap, None if clim is None else tuple(clim), landmarks is None)
+        if self._plotter is None or key != self._key:
+            self.close()
+            self._setup(vertices, colors, scalars, cmap, clim, landmarks)
+            self._key = key
+        else:
+            mesh = self.actor.mapper.dataset
+            mesh.points = np.asarray(vertices, float)
+            name, values = (("scalars", np.asarray(scalars, float)) if scalars is not None else
+                            ("rgb", None if colors is None else (np.clip(colors, 0, 1) * 255).astype(np.uint8)))
+            if values is not None:
+                mesh.point_data[name][:] = values
+                mesh.point_data.GetArray(name).Modified()
+            mesh.compute_normals(inplace=True, cell_normals=False, split_vertices=False)
+            if landmarks is not None:
+                self.points_actor.mapper.dataset.points = np.asarray(landmarks, float)
+            self._plotter.render()
+        return self._plotter.screenshot(return_img=True)
+
+    def close(self):
+        if self._plotter is not None:
+            self._plotter.close()
+            self._plotter = None
+
+    def __del__(self):
+        try:
+            self.close()
+        except Exception:
+            pass
+
+
+def render_face(vertices, **kwargs):
+    """Render one mesh (V, 3) with the book's camera; keyword arguments go to FaceRenderer.render."""
+    size = kwargs.pop("size", (320, 400))
+    view = kwargs.pop("view", "front")
+    r = FaceRenderer(size=size, view=view)
+    try:
+        return r.render(vertices, **kwargs)
+    finally:
+        r.close()
+
+
+def face_grid(meshes, titles=None, ncols=6, size=(240, 300), view="front", panel_width=2.0,
+              scalars=None, cmap="magma_r", clim=None, colorbar_label="mm", **kwargs):
+    """A matplotlib figure with one rendered face per panel (all with the same camera).
+
+    ``scalars``: optional list of per-vertex values (one array per mesh) shown with ``cmap``
+    within ``clim`` and a shared colour bar labelled ``colorbar_label``.
+    """
+    meshes = list(meshes)
+    nrows = int(np.ceil(len(meshes) / ncols))
+    ncols = min(ncols, len(meshes))
+    fig, axes = plt.subplots(nrows, ncols, figsize=(panel_width * ncols, panel_width * 1.25 * nrows),
+                             squeeze=False)
+    if scalars is not None and clim is None:
+        clim = (0.0, float(max(np.max(v) for v in scalars)))
+    renderer = FaceRenderer(size=size, view=view)
+    try:
+        for k, ax in enumerate(axes.ravel()):
+            ax.axis("off")
+            if k < len(meshes):
+                extra = {} if scalars is None else dict(scalars=scalars[k], cmap=cmap, clim=clim)
+                ax.imshow(renderer.render(meshes[k], **extra, **kwargs))
+                if titles is not None:
+                    ax.set_title(titles[k])
+    finally:
+        renderer.close()
+    fig.tight_layout()
+    if scalars is not None:
+        sm = plt.cm.ScalarMappable(cmap=cmap, norm=plt.Normalize(*clim))
+        fig.colorbar(sm, ax=axes.ravel().tolist(), shrink=0.6, label=colorbar_label)
+    return fig
+
+
+def plot_landmarks(landmarks, ax=None, color="C0", label=None, numbers=False, view="front", **kwargs):
+    """Front (x, y) or side (z, y) projection of 68 landmarks with the iBUG-68 contours."""
+    lm = np.asarray(landmarks)
+    if lm.shape != (68, 3):
+        raise ValueError(f"landmarks must have shape (68, 3), got {lm.shape}")
+    ax = ax or plt.gca()
+    h = 2 if view == "side" else 0
+    for a, b, closed in CONTOURS:
+        idx = list(range(a, b + 1)) + ([a] if closed else [])
+        ax.plot(lm[idx, h], lm[idx, 1], "-", color=color, lw=1.0, **kwargs)
+    ax.plot(lm[:, h], lm[:, 1], "o", color=color, ms=2.5, label=label, **kwargs)
+    if numbers:
+        for i, p in enumerate(lm):
+            ax.annotate(str(i), (p[h], p[1]), fontsize=6, xytext=(2, 2), textcoords="offset points")
+    ax.set_aspect("equal")
+    ax.set_xlabel("z (mm)" if view == "side" else "x (mm)")
+    ax.set_ylabel("y (mm)")
+    return ax
+
+
+def gif_html(frames, fps=12, width=None):
+    """Encode RGB frames (list of (H, W, 3) uint8) as a looping GIF inside an HTML <img> tag."""
+    from PIL import Image
+    images = [Image.fromarray(np.asarray(f)) for f in frames]
+    buf = io.BytesIO()
+    images[0].save(buf, format="GIF", save_all=True, append_images=images[1:], loop=0,
+                   duration=int(1000 / fps), optimize=True)
+    data = base64.b64encode(buf.getvalue()).decode()
+    style = f' width="{width}"' if width else ""
+    return f'<img src="data:image/gif;base64,{data}"{style}/>'
+
+
+def figure_frames(draw, num_frames, figsize=(4, 4), dpi=80):
+    """Render ``draw(fig, f)`` for f in range(num_frames) into RGB frames with matplotlib."""
+    frames = []
+    fig = plt.figure(figsize=figsize, dpi=dpi)
+    for f in range(num_frames):
+        fig.clear()
+        draw(fig, f)
+        fig.canvas.draw()
+        frames.append(np.asarray(fig.canvas.buffer_rgba())[..., :3].copy())
+    plt.close(fig)
+    return frames
+
+
+def animate_meshes(meshes, titles=None, fps=12, size=(240, 300), view="front", width=None, **kwargs):
+    """HTML GIF of a mesh sequence (F, V, 3), or of several side by side ((S, F, V, 3))."""
+    meshes = np.asarray(meshes)
+    if meshes.ndim == 3:
+        meshes = meshes[None]
+    renderer = FaceRenderer(size=size, view=view)
+    try:
+        frames = []
+        for f in range(meshes.shape[1]):
+            panels = [renderer.render(m[f], **kwargs) for m in meshes]
+            frames.append(np.concatenate(panels, axis=1))
+    finally:
+        renderer.close()
+    if titles is not None:
+        frames = [_caption(fr, titles, size[0]) for fr in frames]
+    return gif_html(frames, fps=fps, width=width)
+
+
+def _caption(frame, titles, panel_width):
+    from PIL import Image, ImageDraw
+    img = Image.fromarray(frame)
+    d = ImageDraw.Draw(img)
+    for k, t in enumerate(titles):
+        d.text((k * panel_width + 6, 4), str(t), fill=(40, 40, 40))
+    return np.asarray(img)

@@ -1,0 +1,115 @@
+import json
+import warnings
+
+import numpy as np
+import pytest
+
+from facelib import config, data
+from facelib.face import get_template
+
+
+def test_shapes_counts_and_dtypes():
+    for name, n, subjects, labels in (("coma", 689, 12, 12), ("bu", 1212, 101, 6)):
+        ds = data.load_dataset(name, "all")
+        assert len(ds) == n and ds.landmarks.shape == (n, 40, 68, 3) and ds.landmarks.dtype == np.float32
+        assert ds.labels.dtype == np.int64 and set(np.unique(ds.labels)) == set(range(labels))
+        assert len(np.unique(ds.subjects)) == subjects and set(np.unique(ds.kinds)) == {0, 1}
+        assert np.all(np.isfinite(ds.landmarks))
+        assert ds.au_weights.shape == (n, 40, len(ds.au_names))
+
+
+def test_splits_hold_out_whole_subjects():
+    for name in ("coma", "bu"):
+        train, test = data.load_dataset(name, "train"), data.load_dataset(name, "test")
+        assert not set(train.subjects) & set(test.subjects)
+        assert len(train) + len(test) == len(data.load_dataset(name, "all"))
+        assert set(np.unique(test.labels)) == set(range(len(test.label_names)))
+
+
+def test_generation_is_deterministic():
+    spec = config.DATASETS["coma"]
+    a, b = data.generate(spec), data.generate(spec)
+    for k in a:
+        np.testing.assert_array_equal(a[k], b[k], err_msg=k)
+
+
+def test_committed_fingerprints_match():
+    expected = json.loads(data.FINGERPRINT_FILE.read_text())
+    for name in config.DATASETS:
+        actual = data.fingerprint(data.build(name))
+        assert data.fingerprints_match(actual, expected[f"{name}-F40"]), (name, actual, expected[f"{name}-F40"])
+
+
+def test_corrupted_cache_is_detected_and_rebuilt(tmp_path):
+    a = data.build("coma", 20, cache_dir=tmp_path)
+    path = data.cache_path("coma", 20, cache_dir=tmp_path)
+    raw = bytearray(path.read_bytes())
+    raw[len(raw) // 2] ^= 0xFF
+    path.write_bytes(bytes(raw))
+    with pytest.warns(RuntimeWarning, match="corrupted"):
+        b = data.build("coma", 20, cache_dir=tmp_path)
+    np.testing.assert_array_equal(a["landmarks"], b["landmarks"])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        data.build("coma", 20, cache_dir=tmp_path)  # the rebuilt cache is valid again
+    path.with_suffix(".sha256").unlink()
+    with pytest.warns(RuntimeWarning, match="corrupted or incomplete"):
+        data.build("coma", 20, cache_dir=tmp_path)
+
+
+def test_meshes_and_landmarks_agree(coma_train):
+    i = 5
+    meshes = coma_train.meshes(i)
+    assert meshes.shape == (40, len(get_template().vertices), 3)
+    diff = meshes[:, get_template().landmark_index] - coma_train.landmarks[i]
+    assert np.abs(diff).max() < 6 * data.TIMING.noise_mm  # only the capture noise separates them
+    assert abs(diff.std() - data.TIMING.noise_mm) < 0.05
+    s = int(coma_train.subjects[i])
+    np.testing.assert_allclose(coma_train.neutral_mesh(s)[get_template().landmark_index],
+                               coma_train.neutral_landmarks(s), atol=1e-4)
+
+
+def test_n2e_starts_and_e2n_ends_near_neutral(coma_train):
+    neutral = np.stack([coma_train.neutral_landmarks(int(s)) for s in coma_train.subjects])
+    first = np.abs(coma_train.landmarks[:, 0] - neutral).mean(axis=(1, 2))
+    last = np.abs(coma_train.landmarks[:, -1] - neutral).mean(axis=(1, 2))
+    n2e, e2n = coma_train.kinds == 0, coma_train.kinds == 1
+    assert np.median(first[n2e]) < 0.5 * np.median(last[n2e])
+    assert np.median(last[e2n]) < 0.5 * np.median(first[e2n])
+
+
+def test_other_and_variable_lengths():
+    ds = data.load_dataset("coma", "test", num_frames=60)
+    assert ds.landmarks.shape[1:] == (60, 68, 3)
+    var = data.load_dataset("coma", "test", num_frames=(35, 45))
+    assert var.lengths.min() >= 35 and var.lengths.max() <= 45 and len(np.unique(var.lengths)) > 3
+    for i in range(5):
+        assert np.all(var.landmarks[i, var.lengths[i]:] == 0) and np.all(var.landmarks[i, :var.lengths[i]] != 0)
+
+
+def test_expression_split(coma_train):
+    train, test = data.expression_split(coma_train, ["mouth_open", "eyebrow"])
+    names = {coma_train.label_names[k] for k in np.unique(test.labels)}
+    assert names == {"mouth_open", "eyebrow"} and len(train) + len(test) == len(coma_train)
+    assert not names & {coma_train.label_names[k] for k in np.unique(train.labels)}
+    with pytest.raises(ValueError, match="unknown label 'happy' for dataset 'coma'; allowed: bareteeth"):
+        data.expression_split(coma_train, ["happy"])
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    (dict(name="cmoa"), "unknown dataset 'cmoa'; allowed: coma, bu"),
+    (dict(name="coma", split="val"), "unknown split 'val'; allowed: train, test, all"),
+    (dict(name="coma", num_frames=1), r"num_frames must be in \[2, 400\]"),
+    (dict(name="coma", num_frames=40.0), "num_frames must be an integer"),
+    (dict(name="coma", num_frames=(45, 35)), "low > high"),
+])
+def test_bad_input(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        data.load_dataset(**kwargs)
+
+
+def test_bad_indices(coma_train):
+    with pytest.raises(ValueError, match="sequence index"):
+        coma_train.meshes(len(coma_train))
+    with pytest.raises(ValueError, match="subject must be in"):
+        coma_train.neutral_mesh(99)
