@@ -235,10 +235,14 @@ class Face:
         return neutral_vertices(self.coeffs, self.template)
 
     @cached_property
+    def normals(self):
+        """Unit vertex normals (V, 3) of the neutral mesh."""
+        return vertex_normals(self.neutral, self.template.faces)
+
+    @cached_property
     def basis(self):
         """Stylized blendshapes (NUM_AUS, V, 3) in mm at intensity 1 (zero for the rotations)."""
-        t, s = self.template, self.coeffs
-        normals = vertex_normals(self.neutral, t.faces)
+        t, s, normals = self.template, self.coeffs, self.normals
         # The cheekbone target of AU12, on this identity's neutral (subject's left side).
         cheek = self.neutral[_nearest(t.canonical, 46.0, 10.0)]
         fields = []
@@ -256,8 +260,7 @@ class Face:
     def correctives(self):
         """Corrective fields {(a, b): (V, 3)} of the interacting AU pairs."""
         t, s = self.template, self.coeffs
-        normals = vertex_normals(self.neutral, t.faces)
-        return {pair: _field(regions, t.canonical, self.neutral, normals, s, f"{pair[0]}+{pair[1]}")
+        return {pair: _field(regions, t.canonical, self.neutral, self.normals, s, f"{pair[0]}+{pair[1]}")
                 for pair, regions in CORRECTIVES.items()}
 
     @cached_property

@@ -245,14 +245,8 @@ def _nearest_on_row(canonical, row, x):
     return row * N_COLS + int(np.argmin(np.abs(xs - x)))
 
 
-def _nearest_vertex(canonical, x, y, rows=None):
-    d = (canonical[:, 0] - x) ** 2 + (canonical[:, 1] - y) ** 2
-    if rows is not None:
-        allowed = np.zeros(len(canonical), bool)
-        for r in rows:
-            allowed[r * N_COLS:(r + 1) * N_COLS] = True
-        d = np.where(allowed, d, np.inf)
-    return int(np.argmin(d))
+def _nearest_vertex(canonical, x, y):
+    return int(np.argmin((canonical[:, 0] - x) ** 2 + (canonical[:, 1] - y) ** 2))
 
 
 def _mirror(index):
@@ -280,14 +274,12 @@ def _landmarks(canonical):
         idx[22 + k] = v
         idx[21 - k] = _mirror(v)
     # Nose bridge 27..30 on the midline, lower nose 31..35.
-    mid = N_COLS // 2
+    mid = N_COLS // 2  # the midline column, x0 = 0
     for k, y in enumerate([33.0, 21.0, 9.0, -3.0]):
-        idx[27 + k] = _nearest_vertex(canonical, 0.0, y, rows=None) // N_COLS * N_COLS + mid
+        idx[27 + k] = _nearest_vertex(canonical, 0.0, y)
     for k, (x, y) in enumerate([(0.0, -14.5), (5.5, -13.5), (11.5, -11.5)]):
-        v = _nearest_vertex(canonical, x, y)
-        idx[33 + k] = v if k else (v // N_COLS) * N_COLS + mid
-        if k:
-            idx[33 - k] = _mirror(v)
+        idx[33 + k] = _nearest_vertex(canonical, x, y)
+        idx[33 - k] = _mirror(idx[33 + k])
     # Eyes: 36..41 right eye (outer corner, 2 upper, inner corner, 2 lower); 42..47 left eye
     # (inner corner, 2 upper, outer corner, 2 lower).
     cx, cy = EYE_CENTER
@@ -308,14 +300,10 @@ def _landmarks(canonical):
     outer_corner = _nearest_on_row(canonical, LOWER_INNER_LIP_ROW + MOUTH_BAND // 2 + 1, MOUTH_CORNER_X + 1.5)
     idx[54] = outer_corner
     idx[48] = _mirror(outer_corner)
-    up_v = [_nearest_vertex(canonical, x, y) for x, y in zip(xo[1:], uo[1:])]  # 53, 52, 51
-    idx[53], idx[52] = up_v[0], up_v[1]
-    idx[51] = (up_v[2] // N_COLS) * N_COLS + mid
-    idx[49], idx[50] = _mirror(up_v[0]), _mirror(up_v[1])
-    lo_v = [_nearest_vertex(canonical, x, y) for x, y in zip(xo[1:], lo_[1:])]  # 55, 56, 57
-    idx[55], idx[56] = lo_v[0], lo_v[1]
-    idx[57] = (lo_v[2] // N_COLS) * N_COLS + mid
-    idx[59], idx[58] = _mirror(lo_v[0]), _mirror(lo_v[1])
+    idx[53], idx[52], idx[51] = (_nearest_vertex(canonical, x, y) for x, y in zip(xo[1:], uo[1:]))
+    idx[49], idx[50] = _mirror(idx[53]), _mirror(idx[52])
+    idx[55], idx[56], idx[57] = (_nearest_vertex(canonical, x, y) for x, y in zip(xo[1:], lo_[1:]))
+    idx[59], idx[58] = _mirror(idx[55]), _mirror(idx[56])
     inner_corner = _nearest_on_row(canonical, LOWER_INNER_LIP_ROW + MOUTH_BAND // 2 + 1, MOUTH_CORNER_X - 3.0)
     idx[64] = inner_corner
     idx[60] = _mirror(inner_corner)
