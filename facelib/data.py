@@ -20,6 +20,7 @@ from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
+import torch
 
 from . import config
 from .face import aus, expressions, sequences
@@ -365,3 +366,39 @@ def fingerprints_match(actual, expected, tolerance_mm=1e-3):
         return False
     keys = [k for k in expected if k.endswith("_mm")]
     return all(abs(actual[k] - expected[k]) <= tolerance_mm for k in keys)
+
+
+@dataclass
+class LandmarkNormalizer:
+    """The one invertible map between landmarks in mm and the networks' space.
+
+    x_norm = (x - mean_shape) / scale, with mean_shape (68, 3) the mean landmark frame of the
+    training data and scale the std (mm) of what remains.  The DDPM works on *absolute* landmarks
+    (paper §3.1): this only recentres and rescales, it removes nothing.
+    """
+
+    mean_shape: np.ndarray
+    scale: float
+
+    @classmethod
+    def fit(cls, dataset):
+        frames = np.concatenate([dataset.landmarks[i, :dataset.lengths[i]] for i in range(len(dataset))]).astype(np.float64)
+        mean = frames.mean(axis=0)
+        return cls(mean.astype(np.float32), float((frames - mean).std()))
+
+    def normalize(self, x):
+        if isinstance(x, torch.Tensor):
+            return (x - torch.as_tensor(self.mean_shape, device=x.device)) / self.scale
+        return ((np.asarray(x) - self.mean_shape) / self.scale).astype(np.float32)
+
+    def denormalize(self, x):
+        if isinstance(x, torch.Tensor):
+            return x * self.scale + torch.as_tensor(self.mean_shape, device=x.device)
+        return (np.asarray(x) * self.scale + self.mean_shape).astype(np.float32)
+
+    def to_dict(self):
+        return {"mean_shape": np.asarray(self.mean_shape).tolist(), "scale": self.scale}
+
+    @classmethod
+    def from_dict(cls, d):
+        return cls(np.asarray(d["mean_shape"], dtype=np.float32), float(d["scale"]))

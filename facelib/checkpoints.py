@@ -1,0 +1,64 @@
+"""Save and load model weights: a state_dict (.pt) beside a JSON with the config (MDM style).
+
+The JSON records the sha256 of the .pt; loading checks it, so a corrupted or swapped weight file
+is reported instead of silently producing garbage.  Loading also checks that the checkpoint is
+of the expected kind and that its weights fit the architecture its config describes.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+
+import torch
+
+from . import config
+
+
+def _sha256(path):
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def checkpoint_paths(name):
+    """(weights .pt, metadata .json) of a checkpoint given by name (in data/checkpoints) or path stem."""
+    stem = Path(name)
+    if not stem.parent.parts or str(stem.parent) == ".":
+        stem = config.CHECKPOINT_DIR / stem
+    stem = stem.with_suffix("") if stem.suffix in (".pt", ".json") else stem
+    return stem.with_suffix(".pt"), stem.with_suffix(".json")
+
+
+def save_checkpoint(name, model, kind, model_config, **metadata):
+    """Write ``name``.pt (state_dict) and ``name``.json (kind, config, sha256, metadata)."""
+    pt, js = checkpoint_paths(name)
+    pt.parent.mkdir(parents=True, exist_ok=True)
+    torch.save({k: v.detach().cpu() for k, v in model.state_dict().items()}, pt)
+    meta = {"kind": kind, "config": model_config, "sha256": _sha256(pt), **metadata}
+    js.write_text(json.dumps(meta, indent=1) + "\n")
+    return pt, js
+
+
+def load_checkpoint(name, kind, build):
+    """Load a checkpoint: verify its sha256 and kind, build the model with ``build(config)``.
+
+    Returns (model in eval mode, metadata dict).  Raises FileNotFoundError if it is missing and
+    ValueError if it is corrupted, of another kind, or does not fit the architecture.
+    """
+    pt, js = checkpoint_paths(name)
+    if not pt.exists() or not js.exists():
+        raise FileNotFoundError(f"checkpoint {pt.with_suffix('')} not found (need both .pt and .json); "
+                                f"train it with `python -m facelib train ...`")
+    meta = json.loads(js.read_text())
+    if meta.get("kind") != kind:
+        raise ValueError(f"checkpoint {pt.name} is a {meta.get('kind')!r} checkpoint, expected {kind!r}")
+    actual = _sha256(pt)
+    if actual != meta.get("sha256"):
+        raise ValueError(f"checkpoint {pt.name} is corrupted or does not match its metadata: sha256 "
+                         f"{actual[:12]}... != {str(meta.get('sha256'))[:12]}... recorded in {js.name}")
+    model = build(meta["config"])
+    state = torch.load(pt, map_location="cpu", weights_only=True)
+    missing, unexpected = model.load_state_dict(state, strict=False)
+    if missing or unexpected:
+        raise ValueError(f"checkpoint {pt.name} does not fit a {kind} built from its config: "
+                         f"missing {list(missing)[:5]}, unexpected {list(unexpected)[:5]}")
+    return model.eval(), meta

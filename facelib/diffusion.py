@@ -1,0 +1,195 @@
+"""Gaussian diffusion (DDPM, paper §3.1): schedules, the forward process, the reverse process.
+
+Time convention (said once, here): **t is 1-based, as in the paper**.  t = 1..T are the noisy
+steps and t = 0 is the data; every coefficient array has length T + 1 and is indexed by the
+paper's t, e.g. ``alphas_bar[t]`` is alpha_bar_t with ``alphas_bar[0] = 1`` and ``betas[0] = 0``.
+
+Schedules are free functions; :class:`GaussianDiffusion` precomputes every coefficient in
+float64 (numpy) and owns every closed form:
+
+* ``q_sample``           x_t ~ q(x_t | x_0) = N(sqrt(abar_t) x_0, (1 - abar_t) I)                (Eq. 3, 6)
+* ``q_posterior``        q(x_{t-1} | x_t, x_0) = N(mu~_t, beta~_t I)
+* ``p_mean_variance``    mu_theta(x_t, t) = (x_t - beta_t / sqrt(1 - abar_t) eps_theta) / sqrt(alpha_t)  (Eq. 7,
+                         in its correct form: the paper prints sqrt(1 - alpha_t))
+* ``p_sample``           x_{t-1} ~ p_theta(x_{t-1} | x_t) = N(mu_theta, sigma_t^2 I), sigma_t^2 = beta_t  (Eq. 5, §4)
+* ``sample``             the whole reverse chain from x_T ~ N(0, I), with a progress bar and a per-step callback
+* ``training_loss``      E ||eps - eps_theta(x_t, t)||^2                                           (Eq. 8)
+* ``respace``            the same model on a subset of the steps (fewer steps, no retraining)
+
+The network is called as ``model(x_t, t_model, mask)`` where ``t_model`` is the step of the
+*original* schedule (respaced diffusions keep that mapping in ``timesteps``).
+"""
+from __future__ import annotations
+
+import numpy as np
+import torch
+from tqdm.auto import tqdm
+
+VARIANCES = ("beta", "posterior")
+
+
+def linear_betas(num_steps=2000, beta_start=1e-4, beta_end=0.02):
+    """beta_1..beta_T growing linearly (paper §4: 1e-4 to 0.02, T = 2000), shape (T,)."""
+    _check_steps(num_steps)
+    return np.linspace(beta_start, beta_end, num_steps, dtype=np.float64)
+
+
+def cosine_betas(num_steps=2000, s=0.008, max_beta=0.999):
+    """The cosine schedule of Nichol & Dhariwal (2021): abar_t = cos^2((t/T + s)/(1 + s) pi/2)/f(0)."""
+    _check_steps(num_steps)
+    t = np.arange(num_steps + 1, dtype=np.float64) / num_steps
+    f = np.cos((t + s) / (1 + s) * np.pi / 2) ** 2
+    abar = f / f[0]
+    return np.clip(1.0 - abar[1:] / abar[:-1], 0.0, max_beta)
+
+
+def named_betas(name, num_steps):
+    """Schedule by name: "linear" (the paper's) or "cosine"."""
+    schedules = {"linear": linear_betas, "cosine": cosine_betas}
+    if name not in schedules:
+        raise ValueError(f"unknown noise schedule {name!r}; allowed: {', '.join(schedules)}")
+    return schedules[name](num_steps)
+
+
+def _check_steps(num_steps):
+    if isinstance(num_steps, bool) or not isinstance(num_steps, (int, np.integer)) or num_steps < 1:
+        raise ValueError(f"the number of diffusion steps must be a positive integer, got {num_steps!r}")
+
+
+def _extract(array, t, x):
+    """array[t] as a float tensor on x's device, shaped to broadcast against x (batch first)."""
+    t = torch.as_tensor(t, device="cpu").long()
+    values = torch.as_tensor(array, dtype=torch.float64)[t].to(device=x.device, dtype=x.dtype)
+    return values.reshape(values.shape + (1,) * (x.ndim - values.ndim))
+
+
+class GaussianDiffusion:
+    """Every closed form of a DDPM with the given betas (beta_1..beta_T), t 1-based.
+
+    variance: "beta" uses sigma_t^2 = beta_t (paper §4); "posterior" uses beta~_t.
+    timesteps: the model's time label of each step (default 1..T; respacing keeps the original ones).
+    """
+
+    def __init__(self, betas, variance="beta", timesteps=None):
+        betas = np.asarray(betas, dtype=np.float64)
+        if betas.ndim != 1 or len(betas) == 0 or not np.all((betas > 0) & (betas < 1)):
+            raise ValueError("betas must be a non-empty 1-D array with values in (0, 1)")
+        if variance not in VARIANCES:
+            raise ValueError(f"variance must be one of {VARIANCES}, got {variance!r}")
+        self.num_steps = len(betas)
+        self.variance = variance
+        self.betas = np.concatenate([[0.0], betas])
+        self.alphas = 1.0 - self.betas
+        self.alphas_bar = np.cumprod(self.alphas)
+        self.alphas_bar_prev = np.concatenate([[1.0], self.alphas_bar[:-1]])  # abar_{t-1}
+        self.sqrt_alphas_bar = np.sqrt(self.alphas_bar)
+        self.sqrt_one_minus_alphas_bar = np.sqrt(1.0 - self.alphas_bar)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            # q(x_{t-1} | x_t, x_0) = N(coef_x0 x_0 + coef_xt x_t, beta~_t I), defined for t >= 1.
+            self.posterior_variance = np.nan_to_num(self.betas * (1.0 - self.alphas_bar_prev) / (1.0 - self.alphas_bar))
+            self.posterior_coef_x0 = np.nan_to_num(np.sqrt(self.alphas_bar_prev) * self.betas / (1.0 - self.alphas_bar))
+            self.posterior_coef_xt = np.nan_to_num(np.sqrt(self.alphas) * (1.0 - self.alphas_bar_prev) / (1.0 - self.alphas_bar))
+            # Eq. 7: mu = (x_t - eps_coef * eps) / sqrt(alpha_t), eps_coef = beta_t / sqrt(1 - abar_t).
+            self.eps_coef = np.nan_to_num(self.betas / self.sqrt_one_minus_alphas_bar)
+        self.sigmas = np.sqrt(self.betas if variance == "beta" else self.posterior_variance)
+        self.timesteps = np.arange(self.num_steps + 1) if timesteps is None else np.asarray(timesteps)
+
+    def __repr__(self):
+        return f"GaussianDiffusion(T={self.num_steps}, variance={self.variance!r})"
+
+    # ----------------------------------------------------------------------------- forward process
+    def q_sample(self, x0, t, eps=None, generator=None):
+        """Sample x_t ~ q(x_t | x_0) = N(sqrt(abar_t) x_0, (1 - abar_t) I)   (Eq. 3; Eq. 6 with eps)."""
+        if eps is None:
+            eps = torch.randn(x0.shape, generator=generator, dtype=x0.dtype).to(x0.device)
+        return _extract(self.sqrt_alphas_bar, t, x0) * x0 + _extract(self.sqrt_one_minus_alphas_bar, t, x0) * eps
+
+    def q_step(self, x_prev, t, generator=None):
+        """Sample x_t ~ q(x_t | x_{t-1}) = N(sqrt(1 - beta_t) x_{t-1}, beta_t I)   (Eq. 2)."""
+        eps = torch.randn(x_prev.shape, generator=generator, dtype=x_prev.dtype).to(x_prev.device)
+        return _extract(np.sqrt(self.alphas), t, x_prev) * x_prev + _extract(np.sqrt(self.betas), t, x_prev) * eps
+
+    def q_posterior(self, x0, xt, t):
+        """Mean and variance of q(x_{t-1} | x_t, x_0) = N(mu~_t(x_t, x_0), beta~_t I)."""
+        mean = _extract(self.posterior_coef_x0, t, xt) * x0 + _extract(self.posterior_coef_xt, t, xt) * xt
+        return mean, _extract(self.posterior_variance, t, xt)
+
+    def predict_x0(self, xt, t, eps):
+        """x_0 implied by x_t and a noise estimate: invert Eq. 6."""
+        return (xt - _extract(self.sqrt_one_minus_alphas_bar, t, xt) * eps) / _extract(self.sqrt_alphas_bar, t, xt)
+
+    # ----------------------------------------------------------------------------- reverse process
+    def model_time(self, t, batch):
+        """The time label fed to the network for step t of this (maybe respaced) schedule, shape (batch,)."""
+        return torch.full((batch,), float(self.timesteps[t]))
+
+    def p_mean_variance(self, model, xt, t, mask=None):
+        """Mean and variance of p_theta(x_{t-1} | x_t) from eps_theta (Eq. 7, correct form), and x0_hat."""
+        eps = model(xt, self.model_time(t, xt.shape[0]).to(xt.device), mask)
+        mean = (xt - _extract(self.eps_coef, t, xt) * eps) / _extract(np.sqrt(self.alphas), t, xt)
+        return {"mean": mean, "variance": _extract(self.sigmas ** 2, t, xt), "eps": eps,
+                "x0": self.predict_x0(xt, t, eps)}
+
+    def p_sample(self, model, xt, t, generator=None, mask=None, guide=None):
+        """Sample x_{t-1} ~ p_theta(x_{t-1} | x_t) = N(mu_theta(x_t, t), sigma_t^2 I)   (Eq. 5).
+
+        ``guide(x_hat, xt, t, out)``, if given, receives the unguided sample x_hat_{t-1} and the
+        model's mean/variance ``out`` and returns the x_{t-1} to use (the hook of Alg. 1-4).
+        """
+        with torch.no_grad():
+            out = self.p_mean_variance(model, xt, t, mask)
+        z = torch.randn(xt.shape, generator=generator, dtype=xt.dtype).to(xt.device) if t > 1 else torch.zeros_like(xt)
+        x = out["mean"] + _extract(self.sigmas, t, xt) * z
+        if guide is not None:
+            x = guide(x, xt, t, out)
+        if mask is not None:
+            x = x * mask[:, :, None, None]
+        return x, out
+
+    def sample(self, model, shape, seed=0, x_T=None, mask=None, guide=None, callback=None, progress=True):
+        """Run the reverse chain from x_T ~ N(0, I) down to x_0 and return x_0.
+
+        shape: (batch, frames, 68, 3).  callback(t, x_{t-1}, out) is called after every step
+        (for animations and the downstream tasks).  Deterministic for a given seed.
+        """
+        generator = torch.Generator().manual_seed(seed)
+        device = next(model.parameters()).device if hasattr(model, "parameters") else torch.device("cpu")
+        x = torch.randn(shape, generator=generator).to(device) if x_T is None else x_T.to(device)
+        if mask is not None:
+            x = x * mask[:, :, None, None]
+        for t in tqdm(range(self.num_steps, 0, -1), desc="sampling", disable=not progress, leave=False):
+            x, out = self.p_sample(model, x, t, generator, mask, guide)
+            if callback is not None:
+                callback(t, x, out)
+        return x
+
+    # ----------------------------------------------------------------------------- training
+    def training_loss(self, model, x0, t=None, generator=None, mask=None):
+        """The simple loss of Eq. 8: E_{t, x_0, eps} ||eps - eps_theta(x_t, t)||^2 (mean over valid entries)."""
+        if t is None:
+            t = torch.randint(1, self.num_steps + 1, (x0.shape[0],), generator=generator)
+        eps = torch.randn(x0.shape, generator=generator, dtype=x0.dtype).to(x0.device)
+        xt = self.q_sample(x0, t, eps)
+        pred = model(xt, torch.as_tensor(self.timesteps[t.numpy()], dtype=torch.float32).to(x0.device), mask)
+        err = (eps - pred) ** 2
+        if mask is None:
+            return err.mean()
+        m = mask[:, :, None, None].to(err.dtype)
+        return (err * m).sum() / (m.sum() * err.shape[2] * err.shape[3])
+
+    # ----------------------------------------------------------------------------- respacing
+    def respace(self, steps):
+        """The same trained model on fewer steps: keep the steps in ``steps`` (an int K for K evenly
+        spaced steps, or a list of paper steps), with betas recomputed from the kept abar
+        (Nichol & Dhariwal 2021).  The result feeds the model the original time labels."""
+        if isinstance(steps, (int, np.integer)) and not isinstance(steps, bool):
+            if not 1 <= steps <= self.num_steps:
+                raise ValueError(f"respace to 1..{self.num_steps} steps, got {steps}")
+            kept = np.unique(np.round(np.linspace(1, self.num_steps, steps)).astype(int))
+        else:
+            kept = np.unique(np.asarray(steps, dtype=int))
+            if len(kept) == 0 or kept.min() < 1 or kept.max() > self.num_steps:
+                raise ValueError(f"respaced steps must lie in 1..{self.num_steps}")
+        abar = self.alphas_bar[kept]
+        betas = 1.0 - abar / np.concatenate([[1.0], abar[:-1]])
+        return GaussianDiffusion(betas, self.variance, timesteps=np.concatenate([[0], self.timesteps[kept]]))
