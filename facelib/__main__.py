@@ -1,4 +1,4 @@
-"""Command line of the book: ``python -m facelib data`` (later: train, sample, animate, evaluate)."""
+"""Command line of the book: ``python -m facelib {data,train,sample}`` (see ``--help`` of each)."""
 from __future__ import annotations
 
 import argparse
@@ -34,6 +34,40 @@ def _data(args):
     return status
 
 
+def _train(args):
+    from dataclasses import replace
+
+    from . import train
+    if args.name != "denoiser":
+        raise ValueError(f"unknown model {args.name!r}; allowed: denoiser")
+    cfg = train.DenoiserTraining(dataset=args.dataset, seed=args.seed)
+    if args.variable_length:
+        cfg = replace(cfg, num_frames=(35, 45))
+    if args.steps:
+        cfg = replace(cfg, steps=args.steps, warmup=min(cfg.warmup, args.steps // 10))
+    t0 = time.perf_counter()
+    pt, js = train.train_and_save(cfg, name=args.out)
+    print(f"trained in {time.perf_counter() - t0:.0f} s; wrote {pt} and {js}")
+    return 0
+
+
+def _sample(args):
+    import numpy as np
+
+    from . import tasks
+    if args.task != "unconditional":
+        raise ValueError(f"unknown task {args.task!r}; allowed: unconditional")
+    denoiser = tasks.load_denoiser(args.checkpoint)
+    landmarks = tasks.unconditional(args.n, num_frames=args.length, seed=args.seed, steps=args.steps,
+                                    denoiser=denoiser)
+    used = {"task": args.task, "n": args.n, "length": args.length, "seed": args.seed,
+            "steps": args.steps or denoiser.diffusion.num_steps, "checkpoint": args.checkpoint,
+            "checkpoint_sha256": denoiser.meta["sha256"]}
+    np.savez(args.out, landmarks=landmarks.astype(np.float32), config=json.dumps(used))
+    print(f"wrote {args.out}: landmarks {landmarks.shape} float32 (mm); config {used}")
+    return 0
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(prog="python -m facelib", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -44,6 +78,25 @@ def main(argv=None):
     p.add_argument("--write-fingerprints", action="store_true",
                    help="record the datasets' fingerprints in data/synthetic/fingerprints.json")
     p.set_defaults(func=_data)
+
+    p = sub.add_parser("train", help="train a model and save it in data/checkpoints (.pt + .json)")
+    p.add_argument("name", help="what to train: denoiser")
+    p.add_argument("--dataset", default="coma", choices=list(config.DATASETS))
+    p.add_argument("--variable-length", action="store_true", help="train on lengths 35-45 (paper App. A)")
+    p.add_argument("--steps", type=int, default=None, help="training steps (default: the shipped recipe)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", default=None, help="checkpoint name or path stem (default: denoiser_<dataset>[_var])")
+    p.set_defaults(func=_train)
+
+    p = sub.add_parser("sample", help="generate landmark sequences and write them to an .npz")
+    p.add_argument("--task", default="unconditional", help="unconditional")
+    p.add_argument("--n", type=int, default=16, help="number of sequences")
+    p.add_argument("--length", type=int, default=40, help="frames per sequence")
+    p.add_argument("--steps", type=int, default=None, help="reverse steps (default: all T = 2000; fewer = respaced)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--checkpoint", default="denoiser_coma")
+    p.add_argument("--out", required=True, help="output .npz (key 'landmarks': (n, F, 68, 3) float32 in mm)")
+    p.set_defaults(func=_sample)
     args = parser.parse_args(argv)
     try:
         return args.func(args)

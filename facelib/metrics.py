@@ -17,3 +17,38 @@ def confusion_matrix(predicted, true, num_classes):
     c = np.zeros((num_classes, num_classes), dtype=np.int64)
     np.add.at(c, (np.asarray(true), np.asarray(predicted)), 1)
     return c
+
+
+def resample_frames(sequences, num_frames):
+    """Linearly resample sequences (n, F, ...) to ``num_frames`` frames in normalised time."""
+    x = np.asarray(sequences, dtype=np.float64)
+    src = np.linspace(0.0, 1.0, x.shape[1])
+    dst = np.linspace(0.0, 1.0, num_frames)
+    idx = np.clip(np.searchsorted(src, dst, side="right") - 1, 0, x.shape[1] - 2)
+    w = ((dst - src[idx]) / (src[idx + 1] - src[idx])).reshape((1, -1) + (1,) * (x.ndim - 2))
+    return ((1 - w) * x[:, idx] + w * x[:, idx + 1]).astype(np.float32)
+
+
+def nearest_neighbour_rmse(queries, references, exclude_self=False, return_index=False):
+    """For each query sequence, the RMSE (mm) to its closest reference sequence (same shape).
+
+    RMSE over all frames, landmarks and coordinates.  Used to check that generated sequences
+    are new (not copies of training sequences): compare with held-out real sequences.
+    With ``return_index``, also the index of that closest reference.
+    """
+    import torch
+    q = torch.as_tensor(np.asarray(queries, dtype=np.float32)).flatten(1)
+    r = torch.as_tensor(np.asarray(references, dtype=np.float32)).flatten(1)
+    if q.shape[1] != r.shape[1]:
+        raise ValueError(f"queries {tuple(q.shape)} and references {tuple(r.shape)} must have the same sequence shape")
+    d = torch.cdist(q.double(), r.double()) / np.sqrt(q.shape[1])
+    if exclude_self:
+        d.fill_diagonal_(float("inf"))
+    best = d.min(dim=1)
+    return (best.values.numpy(), best.indices.numpy()) if return_index else best.values.numpy()
+
+
+def temporal_roughness(sequences):
+    """Mean norm (mm) of the second difference over frames: how jerky a landmark motion is."""
+    x = np.asarray(sequences, dtype=np.float64)
+    return float(np.linalg.norm(x[:, 2:] - 2 * x[:, 1:-1] + x[:, :-2], axis=-1).mean())

@@ -229,3 +229,24 @@ def _caption(frame, titles, panel_width):
     for k, t in enumerate(titles):
         d.text((k * panel_width + 6, 4), str(t), fill=(40, 40, 40))
     return np.asarray(img)
+
+
+def animate_landmarks(sequences, titles=None, fps=12, panel_size=2.6, dpi=70, lim=None):
+    """HTML GIF of landmark sequences (S, F, 68, 3) or (F, 68, 3), front view, side by side."""
+    seqs = np.asarray(sequences)
+    if seqs.ndim == 3:
+        seqs = seqs[None]
+    if seqs.ndim != 4 or seqs.shape[-2:] != (68, 3):
+        raise ValueError(f"sequences must have shape (S, F, 68, 3), got {seqs.shape}")
+    lo, hi = seqs[..., :2].reshape(-1, 2).min(0) - 5, seqs[..., :2].reshape(-1, 2).max(0) + 5
+
+    def draw(fig, f):
+        for k, seq in enumerate(seqs):
+            ax = fig.add_subplot(1, len(seqs), k + 1)
+            plot_landmarks(seq[f], ax=ax, color="C0")
+            ax.set(xlim=(lo[0], hi[0]), ylim=(lo[1], hi[1]), xticks=[], yticks=[], xlabel="", ylabel="")
+            ax.set_title(titles[k] if titles is not None else f"frame {f + 1}", fontsize=8)
+        fig.tight_layout()
+
+    frames = figure_frames(draw, seqs.shape[1], figsize=(panel_size * len(seqs), panel_size * 1.2), dpi=dpi)
+    return gif_html(frames, fps=fps)

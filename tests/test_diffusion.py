@@ -1,0 +1,154 @@
+"""Closed forms of the DDPM (paper §3.1) against Monte-Carlo and against each other."""
+import numpy as np
+import pytest
+import torch
+
+from facelib.diffusion import GaussianDiffusion, cosine_betas, linear_betas, named_betas
+
+
+@pytest.fixture(autouse=True)
+def _float64():
+    torch.set_default_dtype(torch.float64)
+    yield
+    torch.set_default_dtype(torch.float32)
+
+
+def test_schedules():
+    b = linear_betas(2000)
+    assert b.shape == (2000,) and b[0] == pytest.approx(1e-4) and b[-1] == pytest.approx(0.02)
+    d = GaussianDiffusion(b)
+    assert d.alphas_bar[0] == 1.0 and d.betas[0] == 0.0  # t = 0 is the data
+    assert d.alphas_bar[-1] < 1e-8  # x_T is (almost) pure noise
+    c = GaussianDiffusion(cosine_betas(2000))
+    assert np.all(np.diff(c.alphas_bar) < 0)
+    with pytest.raises(ValueError, match="unknown noise schedule 'quadratic'; allowed: linear, cosine"):
+        named_betas("quadratic", 10)
+    with pytest.raises(ValueError, match="positive integer"):
+        linear_betas(0)
+    with pytest.raises(ValueError, match="variance must be one of"):
+        GaussianDiffusion(b, variance="learned")
+
+
+def test_closed_form_matches_iterating_the_chain():
+    """Eq. 3: x_t ~ N(sqrt(abar_t) x_0, (1 - abar_t) I), checked by iterating Eq. 2."""
+    d = GaussianDiffusion(linear_betas(100, 1e-3, 0.05))
+    g = torch.Generator().manual_seed(0)
+    x0 = torch.full((40_000,), 1.5)
+    x = x0.clone()
+    for t in range(1, 61):
+        x = d.q_step(x, t, generator=g)
+    n = len(x)
+    mean, var = d.sqrt_alphas_bar[60] * 1.5, 1 - d.alphas_bar[60]
+    assert abs(x.mean().item() - mean) < 4 * np.sqrt(var / n)
+    assert abs(x.var().item() - var) < 4 * var * np.sqrt(2 / n)
+    direct = d.q_sample(x0, 60, generator=g)
+    assert abs(direct.mean().item() - mean) < 4 * np.sqrt(var / n)
+
+
+def test_reparameterisation_is_eq6():
+    d = GaussianDiffusion(linear_betas(50))
+    x0, eps = torch.randn(3, 5), torch.randn(3, 5)
+    t = torch.tensor([1, 20, 50])
+    xt = d.q_sample(x0, t, eps)
+    abar = torch.as_tensor(d.alphas_bar[t.numpy()])[:, None]
+    expected = abar.sqrt() * x0 + (1 - abar).sqrt() * eps
+    torch.testing.assert_close(xt, expected)
+    torch.testing.assert_close(d.predict_x0(xt, t, eps), x0)
+
+
+def test_posterior_matches_regression_of_the_joint():
+    """q(x_{t-1} | x_t, x_0) is the linear regression of x_{t-1} on x_t under the forward process."""
+    d = GaussianDiffusion(linear_betas(100, 1e-3, 0.05))
+    g = torch.Generator().manual_seed(1)
+    t, x0 = 30, 0.7
+    x_prev = d.q_sample(torch.full((200_000,), x0), t - 1, generator=g)
+    x_t = d.q_step(x_prev, t, generator=g)
+    slope, intercept = np.polyfit(x_t.numpy(), x_prev.numpy(), 1)
+    resid = x_prev.numpy() - (slope * x_t.numpy() + intercept)
+    assert slope == pytest.approx(d.posterior_coef_xt[t], abs=0.01)
+    assert intercept == pytest.approx(d.posterior_coef_x0[t] * x0, abs=0.01)
+    assert resid.var() == pytest.approx(d.posterior_variance[t], rel=0.02)
+
+
+def test_eq7_is_the_posterior_mean_with_the_true_noise_and_the_typo_is_not():
+    d = GaussianDiffusion(linear_betas(2000))
+    x0, eps = torch.randn(8, 4), torch.randn(8, 4)
+    for t in (2, 100, 1000, 2000):
+        xt = d.q_sample(x0, t, eps)
+        oracle = lambda x, tm, mask: eps  # noqa: E731  (the perfect noise predictor)
+        mean = d.p_mean_variance(oracle, xt, t)["mean"]
+        post, _ = d.q_posterior(x0, xt, t)
+        torch.testing.assert_close(mean, post)
+        typo = (xt - d.betas[t] / np.sqrt(1 - d.alphas[t]) * eps) / np.sqrt(d.alphas[t])
+        if t >= 100:  # the printed coefficient sqrt(beta_t) removes several times too much noise
+            assert d.betas[t] / np.sqrt(1 - d.alphas[t]) > 3 * d.eps_coef[t]
+            removed = post - xt / np.sqrt(d.alphas[t])  # the noise the correct step removes
+            assert (typo - post).norm() > 2 * removed.norm()
+
+
+def test_kl_term_is_the_weighted_simple_loss():
+    """L_{t-1} = KL(q(x_{t-1}|x_t,x_0) || p_theta) = beta_t^2 / (2 sigma_t^2 alpha_t (1 - abar_t)) ||eps - eps_theta||^2 + C."""
+    d = GaussianDiffusion(linear_betas(1000))
+    x0, eps, eps_hat = torch.randn(6), torch.randn(6), torch.randn(6)
+    t = 400
+    xt = d.q_sample(x0, t, eps)
+    post_mean, post_var = d.q_posterior(x0, xt, t)
+    post_var = float(post_var)
+    p_mean = d.p_mean_variance(lambda x, tm, mask: eps_hat, xt, t)["mean"]
+    s2 = d.sigmas[t] ** 2
+    kl = 0.5 * (6 * post_var / s2 + ((post_mean - p_mean) ** 2).sum() / s2 - 6 + 6 * np.log(s2 / post_var))
+    const = 0.5 * 6 * (post_var / s2 - 1 + np.log(s2 / post_var))
+    weight = d.betas[t] ** 2 / (2 * s2 * d.alphas[t] * (1 - d.alphas_bar[t]))
+    assert float(kl - const) == pytest.approx(weight * float(((eps - eps_hat) ** 2).sum()), rel=1e-9)
+
+
+def test_sampling_with_the_exact_noise_recovers_a_gaussian():
+    """With the exact eps of Gaussian data, the reverse chain (Eq. 5, 7) samples that Gaussian."""
+    d = GaussianDiffusion(linear_betas(300, 1e-4, 0.04))
+    m, s = 2.0, 0.5
+
+    def oracle(xt, t_model, mask):
+        abar = torch.as_tensor(d.alphas_bar[t_model.long().numpy()])[:, None]
+        return (1 - abar).sqrt() * (xt - abar.sqrt() * m) / (abar * s * s + 1 - abar)
+
+    x = d.sample(oracle, (20_000, 1), seed=3, progress=False)
+    assert x.mean().item() == pytest.approx(m, abs=0.03)
+    assert x.std().item() == pytest.approx(s, abs=0.03)
+    x50 = d.respace(50).sample(oracle, (20_000, 1), seed=3, progress=False)
+    assert x50.mean().item() == pytest.approx(m, abs=0.05) and x50.std().item() == pytest.approx(s, abs=0.05)
+
+
+def test_sampling_is_deterministic_and_last_step_adds_no_noise():
+    d = GaussianDiffusion(linear_betas(20))
+    model = lambda x, t, mask: 0.1 * x  # noqa: E731
+    a = d.sample(model, (4, 3), seed=5, progress=False)
+    b = d.sample(model, (4, 3), seed=5, progress=False)
+    torch.testing.assert_close(a, b)
+    x1 = torch.randn(4, 3)
+    s1, out = d.p_sample(model, x1, 1, torch.Generator().manual_seed(0))
+    s2, _ = d.p_sample(model, x1, 1, torch.Generator().manual_seed(9))
+    torch.testing.assert_close(s1, out["mean"])
+    torch.testing.assert_close(s1, s2)
+
+
+def test_respacing_keeps_alpha_bar_and_time_labels():
+    d = GaussianDiffusion(linear_betas(2000))
+    r = d.respace(50)
+    assert r.num_steps == 50 and r.timesteps[1] == 1 and r.timesteps[-1] == 2000
+    np.testing.assert_allclose(r.alphas_bar[1:], d.alphas_bar[r.timesteps[1:]])
+    full = d.respace(2000)
+    np.testing.assert_allclose(full.betas, d.betas)
+    with pytest.raises(ValueError, match="respace to 1..2000 steps"):
+        d.respace(0)
+    seen = []
+    r.p_sample(lambda x, t, mask: seen.append(t) or 0 * x, torch.zeros(2, 1), 50)
+    assert seen[0].tolist() == [2000.0, 2000.0]
+
+
+def test_training_loss_ignores_padded_frames():
+    d = GaussianDiffusion(linear_betas(100))
+    x0 = torch.randn(2, 6, 68, 3)
+    mask = torch.tensor([[True] * 6, [True] * 4 + [False] * 2])
+    model = lambda x, t, m: torch.where(m[:, :, None, None], torch.zeros_like(x), torch.full_like(x, 1e6))  # noqa: E731
+    loss = d.training_loss(model, x0, t=torch.tensor([10, 10]), generator=torch.Generator().manual_seed(0), mask=mask)
+    assert loss.item() < 10  # the huge predictions on padded frames do not count
