@@ -59,6 +59,8 @@ def _check_steps(num_steps):
 def _extract(array, t, x):
     """array[t] as a float tensor on x's device, shaped to broadcast against x (batch first)."""
     t = torch.as_tensor(t, device="cpu").long()
+    if t.numel() and (t.min() < 0 or t.max() >= len(array)):
+        raise ValueError(f"timestep out of range: t must be in 0..{len(array) - 1}, got {t.min().item()}..{t.max().item()}")
     values = torch.as_tensor(array, dtype=torch.float64)[t].to(device=x.device, dtype=x.dtype)
     return values.reshape(values.shape + (1,) * (x.ndim - values.ndim))
 

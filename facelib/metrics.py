@@ -52,3 +52,20 @@ def temporal_roughness(sequences):
     """Mean norm (mm) of the second difference over frames: how jerky a landmark motion is."""
     x = np.asarray(sequences, dtype=np.float64)
     return float(np.linalg.norm(x[:, 2:] - 2 * x[:, 1:-1] + x[:, :-2], axis=-1).mean())
+
+
+DISTANCE_PAIRS = {  # iBUG-68 landmark pairs: "bone-length-like" distances of a face
+    "outer eye corners": (36, 45), "inner eye corners": (39, 42), "brow span": (17, 26),
+    "nose length": (27, 30), "nose width": (31, 35), "jaw width": (0, 16), "face height": (27, 8),
+    "mouth width": (48, 54), "mouth opening": (51, 57), "inner lip gap": (62, 66),
+}
+
+
+def landmark_statistics(sequences):
+    """Per-frame statistics of landmark sequences (n, F, 68, 3): mean inter-landmark distances (mm)
+    of DISTANCE_PAIRS, and the mean frame-to-frame speed of a landmark (mm per frame)."""
+    x = np.asarray(sequences, dtype=np.float64)
+    stats = {name: float(np.linalg.norm(x[..., i, :] - x[..., j, :], axis=-1).mean())
+             for name, (i, j) in DISTANCE_PAIRS.items()}
+    stats["frame-to-frame speed"] = float(np.linalg.norm(np.diff(x, axis=1), axis=-1).mean())
+    return stats

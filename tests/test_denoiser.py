@@ -10,6 +10,7 @@ from facelib.checkpoints import load_checkpoint, save_checkpoint
 from facelib.models.denoiser import Denoiser, DenoiserConfig
 
 SMALL = DenoiserConfig(width=32, depth=2, heads=2, ff=64)
+PLAIN = DenoiserConfig(width=32, depth=2, heads=2, ff=64, gaussian_skip=False)  # output layer not zeroed
 
 
 def test_any_length_and_shape():
@@ -21,7 +22,7 @@ def test_any_length_and_shape():
 
 def test_padded_frames_do_not_change_the_valid_ones():
     torch.manual_seed(0)
-    m = Denoiser(SMALL).eval()
+    m = Denoiser(PLAIN).eval()
     x = torch.randn(1, 40, 68, 3)
     padded = torch.cat([x, torch.randn(1, 5, 68, 3) * 10], dim=1)
     mask = torch.tensor([[True] * 40 + [False] * 5])
@@ -32,7 +33,7 @@ def test_padded_frames_do_not_change_the_valid_ones():
 
 def test_attention_is_bidirectional():
     torch.manual_seed(0)
-    m = Denoiser(SMALL).eval()
+    m = Denoiser(PLAIN).eval()
     x = torch.randn(1, 40, 68, 3)
     y = x.clone()
     y[:, 30] += 1.0  # a change in the future...
@@ -127,3 +128,13 @@ def test_gaussian_estimate_is_the_optimal_noise_estimate_for_gaussian_frames():
         optimum = 1 - ((1 - abar) / (abar * lam + 1 - abar)).mean().item()  # per-dimension posterior variance
         assert mse == pytest.approx(optimum, abs=0.01)
         assert mse < ((xt * (1 - abar) ** 0.5 - eps) ** 2).mean().item()  # beats the isotropic estimate
+
+
+@pytest.mark.parametrize("shape, t_shape, message", [
+    ((2, 40, 204), (2,), "x_t must have shape"),
+    ((2, 40, 60, 3), (2,), "x_t must have shape"),
+    ((2, 40, 68, 3), (3,), "t must have shape"),
+])
+def test_denoiser_rejects_bad_shapes(shape, t_shape, message):
+    with pytest.raises(ValueError, match=message):
+        Denoiser(SMALL)(torch.zeros(shape), torch.zeros(t_shape))

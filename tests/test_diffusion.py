@@ -152,3 +152,28 @@ def test_training_loss_ignores_padded_frames():
     model = lambda x, t, m: torch.where(m[:, :, None, None], torch.zeros_like(x), torch.full_like(x, 1e6))  # noqa: E731
     loss = d.training_loss(model, x0, t=torch.tensor([10, 10]), generator=torch.Generator().manual_seed(0), mask=mask)
     assert loss.item() < 10  # the huge predictions on padded frames do not count
+
+
+def test_posterior_equals_the_bayes_product_of_gaussians():
+    """q(x_{t-1}|x_t,x_0) ∝ q(x_t|x_{t-1}) q(x_{t-1}|x_0): precisions add, means are precision-weighted."""
+    d = GaussianDiffusion(linear_betas(2000))
+    x0, xt = torch.randn(5), torch.randn(5)
+    for t in (2, 37, 800, 2000):
+        a, b, abar_prev = d.alphas[t], d.betas[t], d.alphas_bar[t - 1]
+        # q(x_t | x_{t-1}) as a Gaussian in x_{t-1}: mean x_t / sqrt(a), variance b / a
+        precision = a / b + 1 / (1 - abar_prev)
+        mean = (np.sqrt(a) / b * xt + np.sqrt(abar_prev) / (1 - abar_prev) * x0) / precision
+        got_mean, got_var = d.q_posterior(x0, xt, t)
+        torch.testing.assert_close(got_mean, mean)
+        assert float(got_var) == pytest.approx(1 / precision, rel=1e-12)
+
+
+def test_bad_timesteps_and_betas():
+    d = GaussianDiffusion(linear_betas(10))
+    with pytest.raises(ValueError, match=r"timestep out of range: t must be in 0..10, got 11..11"):
+        d.q_sample(torch.zeros(2), 11)
+    with pytest.raises(ValueError, match="timestep out of range"):
+        d.q_sample(torch.zeros(2, 3), torch.tensor([-1, 3]))
+    for bad in ([0.0, 0.1], [0.5, 1.0], [], [[0.1]]):
+        with pytest.raises(ValueError, match=r"betas must be a non-empty 1-D array with values in \(0, 1\)"):
+            GaussianDiffusion(bad)

@@ -99,6 +99,12 @@ class Denoiser(nn.Module):
 
     def forward(self, xt, t, mask=None):
         """Noise estimate for x_t at steps t; ``mask`` (B, F) bool marks the valid frames."""
+        if xt.ndim != 4 or xt.shape[2:] != (self.config.num_landmarks, 3):
+            raise ValueError(f"x_t must have shape (batch, frames, {self.config.num_landmarks}, 3), got {tuple(xt.shape)}")
+        if t.shape != (xt.shape[0],):
+            raise ValueError(f"t must have shape ({xt.shape[0]},) (one step per sequence), got {tuple(t.shape)}")
+        if mask is not None and mask.shape != xt.shape[:2]:
+            raise ValueError(f"mask must have shape {tuple(xt.shape[:2])}, got {tuple(mask.shape)}")
         b, f = xt.shape[:2]
         t = t.to(xt.device)
         frames = torch.arange(1, f + 1, device=xt.device)
