@@ -27,9 +27,10 @@ book: venv
 	$(BIN)/jupyter-book build . --builder html -W --keep-going
 	@echo "The book is in _build/html/index.html"
 
+# One torch thread per test worker: two workers with two OpenMP threads each on two cores thrash.
 test: venv
 	FACELIB_FAST=1 $(BIN)/python -m facelib data
-	FACELIB_FAST=1 $(BIN)/python -m pytest -n $(WORKERS) --nbmake --nbmake-timeout=1200 tests book
+	FACELIB_FAST=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 $(BIN)/python -m pytest -n $(WORKERS) --nbmake --nbmake-timeout=1200 --durations=8 tests book
 
 clean:
 	rm -rf _build .pytest_cache
