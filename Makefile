@@ -24,7 +24,7 @@ data: venv
 
 book: venv
 	$(BIN)/python -m facelib data
-	$(BIN)/jupyter-book build . --builder html -W --keep-going
+	$(BIN)/jupyter-book build . --builder html --all -W --keep-going
 	@echo "The book is in _build/html/index.html"
 
 # One torch thread per test worker: two workers with two OpenMP threads each on two cores thrash.
