@@ -57,7 +57,10 @@ def load_checkpoint(name, kind, build):
                          f"{actual[:12]}... != {str(meta.get('sha256'))[:12]}... recorded in {js.name}")
     model = build(meta["config"])
     state = torch.load(pt, map_location="cpu", weights_only=True)
-    missing, unexpected = model.load_state_dict(state, strict=False)
+    try:
+        missing, unexpected = model.load_state_dict(state, strict=False)
+    except RuntimeError as e:  # same names, different shapes
+        raise ValueError(f"checkpoint {pt.name} does not fit a {kind} built from its config: {e}") from None
     if missing or unexpected:
         raise ValueError(f"checkpoint {pt.name} does not fit a {kind} built from its config: "
                          f"missing {list(missing)[:5]}, unexpected {list(unexpected)[:5]}")

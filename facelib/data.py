@@ -118,7 +118,7 @@ def generate(spec, num_frames=40):
                                      spec.style_blend_max)
     face, style = None, None
     for i, (s, l, take, kind) in enumerate(plan):  # the plan is ordered by subject, then label
-        if face is None or i == 0 or plan[i - 1][0] != s:
+        if face is None or plan[i - 1][0] != s:
             face = Face(coeffs[s])
         if take == 0:
             style = expressions.sample_style(labels[l], np.random.default_rng([spec.seed, 1, s, l]),

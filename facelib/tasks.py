@@ -8,7 +8,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import torch
 
 from .checkpoints import load_checkpoint
 from .data import LandmarkNormalizer

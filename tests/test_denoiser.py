@@ -66,6 +66,8 @@ def test_checkpoint_roundtrip_and_errors(tmp_path):
         load_checkpoint(stem, "classifier", build)
     with pytest.raises(ValueError, match="does not fit a denoiser"):
         load_checkpoint(stem, "denoiser", lambda c: Denoiser(DenoiserConfig(**{**c, "depth": 3})))
+    with pytest.raises(ValueError, match="does not fit a denoiser"):
+        load_checkpoint(stem, "denoiser", lambda c: Denoiser(DenoiserConfig(**{**c, "width": 48})))
     raw = bytearray(stem.with_suffix(".pt").read_bytes())
     raw[-20] ^= 0xFF
     stem.with_suffix(".pt").write_bytes(bytes(raw))

@@ -31,6 +31,8 @@ from dataclasses import asdict, dataclass
 import torch
 from torch import nn
 
+from ..diffusion import named_betas
+
 
 def sinusoidal_embedding(positions, dim, max_period=10_000.0):
     """Transformer sinusoids of (possibly fractional) positions (...,) -> (..., dim)."""
@@ -74,7 +76,6 @@ class Denoiser(nn.Module):
         if c.gaussian_skip:
             nn.init.zeros_(self.out.weight)
             nn.init.zeros_(self.out.bias)
-        from ..diffusion import named_betas  # local import: diffusion does not depend on models
         abar = torch.cumprod(1 - torch.as_tensor(named_betas(c.schedule, c.num_diffusion_steps)), 0)
         self.register_buffer("alphas_bar", torch.cat([torch.ones(1, dtype=abar.dtype), abar]).float())
         self.register_buffer("prior_basis", torch.eye(features))  # eigenvectors of Sigma (columns)
