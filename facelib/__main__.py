@@ -34,19 +34,35 @@ def _data(args):
     return status
 
 
+TRAINABLE = ("denoiser", "guide", "evaluator", "motion3dgan", "actor")
+TASKS = ("unconditional", "label")
+
+
 def _train(args):
     from dataclasses import replace
 
     from . import train
-    if args.name != "denoiser":
-        raise ValueError(f"unknown model {args.name!r}; allowed: denoiser")
-    cfg = train.DenoiserTraining(dataset=args.dataset, seed=args.seed)
-    if args.variable_length:
-        cfg = replace(cfg, num_frames=(35, 45))
-    if args.steps:
-        cfg = replace(cfg, steps=args.steps, warmup=min(cfg.warmup, args.steps // 10))
+    if args.name not in TRAINABLE:
+        raise ValueError(f"unknown model {args.name!r}; allowed: {', '.join(TRAINABLE)}")
     t0 = time.perf_counter()
-    pt, js = train.train_and_save(cfg, name=args.out)
+    if args.name == "denoiser":
+        cfg = train.DenoiserTraining(dataset=args.dataset, seed=args.seed)
+        if args.variable_length:
+            cfg = replace(cfg, num_frames=(35, 45))
+        if args.steps:
+            cfg = replace(cfg, steps=args.steps, warmup=min(cfg.warmup, args.steps // 10))
+        pt, js = train.train_and_save(cfg, name=args.out)
+    elif args.name == "guide":
+        cfg = train.GuideTraining(dataset=args.dataset, classifier_type=args.type, seed=args.seed)
+        if args.steps:
+            cfg = replace(cfg, steps=args.steps, warmup=min(cfg.warmup, args.steps // 10))
+        pt, js = train.train_and_save_guide(cfg, name=args.out)
+    elif args.name == "evaluator":
+        cfg = train.EvaluatorTraining(dataset=args.dataset, classifier_type=args.type, seed=args.seed)
+        pt, js = train.train_and_save_evaluator(cfg, name=args.out)
+    else:
+        from . import baselines
+        pt, js = baselines.train_and_save_baseline(args.name, args.dataset, args.steps, args.seed, args.out)
     print(f"trained in {time.perf_counter() - t0:.0f} s; wrote {pt} and {js}")
     return 0
 
@@ -55,15 +71,27 @@ def _sample(args):
     import numpy as np
 
     from . import tasks
-    if args.task != "unconditional":
-        raise ValueError(f"unknown task {args.task!r}; allowed: unconditional")
-    denoiser = tasks.load_denoiser(args.checkpoint)
-    landmarks = tasks.unconditional(args.n, num_frames=args.length, seed=args.seed, steps=args.steps,
-                                    denoiser=denoiser)
+    if args.task not in TASKS:
+        raise ValueError(f"unknown task {args.task!r}; allowed: {', '.join(TASKS)}")
+    denoiser = tasks.load_denoiser(args.checkpoint or f"denoiser_{args.dataset}")
     used = {"task": args.task, "n": args.n, "length": args.length, "seed": args.seed,
-            "steps": args.steps or denoiser.diffusion.num_steps, "checkpoint": args.checkpoint,
+            "steps": args.steps or denoiser.diffusion.num_steps, "checkpoint": args.checkpoint or f"denoiser_{args.dataset}",
             "checkpoint_sha256": denoiser.meta["sha256"]}
-    np.savez(args.out, landmarks=landmarks.astype(np.float32), config=json.dumps(used))
+    extra = {}
+    if args.task == "unconditional":
+        landmarks = tasks.unconditional(args.n, num_frames=args.length, seed=args.seed, steps=args.steps,
+                                        denoiser=denoiser)
+    else:
+        if args.label is None:
+            raise ValueError("--task label needs --label (e.g. --label high_smile)")
+        lr = tasks.ADAGRAD_LR if args.lr is None else args.lr
+        landmarks = tasks.label_control(args.label, args.n, dataset=args.dataset, num_frames=args.length,
+                                        steps=args.steps, guidance_weight=args.guidance_weight, lr=lr,
+                                        seed=args.seed, denoiser=denoiser)
+        used.update(dataset=args.dataset, label=args.label, guidance_weight=args.guidance_weight, adagrad_lr=lr,
+                    adagrad_steps=3, classifier="guide_" + args.dataset + "_I")
+        extra["labels"] = np.array([args.label] * args.n)
+    np.savez(args.out, landmarks=landmarks.astype(np.float32), config=json.dumps(used), **extra)
     print(f"wrote {args.out}: landmarks {landmarks.shape} float32 (mm); config {used}")
     return 0
 
@@ -80,21 +108,29 @@ def main(argv=None):
     p.set_defaults(func=_data)
 
     p = sub.add_parser("train", help="train a model and save it in data/checkpoints (.pt + .json)")
-    p.add_argument("name", help="what to train: denoiser")
+    p.add_argument("name", help="what to train: " + ", ".join(TRAINABLE) + " (guide: the noisy classifier "
+                   "of Alg. 1; evaluator: the independent LSTM classifier of §5; motion3dgan, actor: the baselines of Table 1)")
     p.add_argument("--dataset", default="coma", choices=list(config.DATASETS))
+    p.add_argument("--type", default="I", choices=["I", "S"], help="classifier type (guide, evaluator): "
+                   "I = label, S = label x N2E/E2N")
     p.add_argument("--variable-length", action="store_true", help="train on lengths 35-45 (paper App. A)")
     p.add_argument("--steps", type=int, default=None, help="training steps (default: the shipped recipe)")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--out", default=None, help="checkpoint name or path stem (default: denoiser_<dataset>[_var])")
+    p.add_argument("--out", default=None, help="checkpoint name or path stem (default: denoiser_<dataset>[_var], "
+                   "guide_<dataset>_<type>, ic_<dataset>_<type>)")
     p.set_defaults(func=_train)
 
     p = sub.add_parser("sample", help="generate landmark sequences and write them to an .npz")
-    p.add_argument("--task", default="unconditional", help="unconditional")
+    p.add_argument("--task", default="unconditional", help="unconditional or label (Alg. 1)")
+    p.add_argument("--dataset", default="coma", choices=list(config.DATASETS))
+    p.add_argument("--label", default=None, help="expression label for --task label (e.g. high_smile)")
+    p.add_argument("--guidance-weight", type=float, default=0.01, help="lambda of Alg. 1 (paper: 0.01)")
+    p.add_argument("--lr", type=float, default=None, help="Adagrad learning rate of Alg. 1 (default: the book's choice)")
     p.add_argument("--n", type=int, default=16, help="number of sequences")
     p.add_argument("--length", type=int, default=40, help="frames per sequence")
     p.add_argument("--steps", type=int, default=None, help="reverse steps (default: all T = 2000; fewer = respaced)")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--checkpoint", default="denoiser_coma")
+    p.add_argument("--checkpoint", default=None, help="denoiser checkpoint (default: denoiser_<dataset>)")
     p.add_argument("--out", required=True, help="output .npz (key 'landmarks': (n, F, 68, 3) float32 in mm)")
     p.set_defaults(func=_sample)
     args = parser.parse_args(argv)

@@ -42,6 +42,15 @@ def check_dataset_name(name):
     return config.DATASETS[name]
 
 
+CLASSIFIER_TYPES = ("I", "S")  # paper §5: order-Insensitive (label), order-Sensitive (label x N2E/E2N)
+
+
+def check_classifier_type(classifier_type):
+    if classifier_type not in CLASSIFIER_TYPES:
+        raise ValueError(f"classifier type must be one of {CLASSIFIER_TYPES} (I: label, S: label x N2E/E2N), "
+                         f"got {classifier_type!r}")
+
+
 def check_split(split):
     if split not in config.SPLITS:
         raise ValueError(f"unknown split {split!r}; allowed: {', '.join(config.SPLITS)}")
@@ -261,6 +270,17 @@ class FaceDataset:
         """The 68 neutral landmarks (68, 3) in mm of a subject (noise-free)."""
         return self.face(subject).landmarks(np.zeros(aus.NUM_AUS)).astype(np.float32)
 
+    def delta_landmarks(self):
+        """Delta L_f = L_f - L (paper §3.3): every sequence minus its subject's neutral landmarks, (n, F, 68, 3)."""
+        neutral = {s: self.neutral_landmarks(int(s)) for s in np.unique(self.subjects)}
+        own = np.stack([neutral[s] for s in self.subjects])
+        valid = (np.arange(self.landmarks.shape[1])[None, :] < self.lengths[:, None])[..., None, None]
+        return ((self.landmarks - own[:, None]) * valid).astype(np.float32)
+
+    def subject_neutrals(self):
+        """Neutral landmarks (K, 68, 3) of the K subjects of this split (sorted by subject id)."""
+        return np.stack([self.neutral_landmarks(int(s)) for s in np.unique(self.subjects)])
+
     def meshes(self, i):
         """Per-frame meshes (F, V, 3) float32 in mm of sequence i (noise-free; landmarks[i] adds noise)."""
         if not 0 <= i < len(self):
@@ -270,6 +290,21 @@ class FaceDataset:
 
     def label_of(self, i):
         return self.label_names[self.labels[i]]
+
+    def class_names(self, classifier_type="I"):
+        """Class names of a classifier of type "I" (the label: order-insensitive) or "S" (label x
+        N2E/E2N: order-sensitive), as in paper §5."""
+        check_classifier_type(classifier_type)
+        if classifier_type == "I":
+            return tuple(self.label_names)
+        return tuple(f"{label} {kind}" for label in self.label_names for kind in self.kind_names)
+
+    def targets(self, classifier_type="I"):
+        """Class index (n,) of every sequence for a classifier of type "I" or "S" (see class_names)."""
+        check_classifier_type(classifier_type)
+        if classifier_type == "I":
+            return self.labels.copy()
+        return self.labels * len(self.kind_names) + self.kinds
 
     def subset(self, mask, split=None):
         """A new dataset with the sequences selected by a boolean mask or an index array."""

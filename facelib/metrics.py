@@ -69,3 +69,52 @@ def landmark_statistics(sequences):
              for name, (i, j) in DISTANCE_PAIRS.items()}
     stats["frame-to-frame speed"] = float(np.linalg.norm(np.diff(x, axis=1), axis=-1).mean())
     return stats
+
+
+def frechet_distance(features_a, features_b):
+    """Fréchet distance between Gaussians fitted to two feature sets (n, d) (the FID of Heusel et
+    al. 2017): ||mu_a - mu_b||^2 + tr(C_a + C_b - 2 (C_a C_b)^(1/2)).  The paper (§5) feeds it the
+    output of the IC's linear layer (:meth:`IndependentClassifier.forward`)."""
+    a, b = (np.asarray(f, dtype=np.float64) for f in (features_a, features_b))
+    if a.ndim != 2 or b.ndim != 2 or a.shape[1] != b.shape[1]:
+        raise ValueError(f"features must be two (n, d) arrays with the same d, got {a.shape} and {b.shape}")
+    if min(len(a), len(b)) < 2:
+        raise ValueError("the Fréchet distance needs at least 2 feature vectors per set")
+    if not (np.isfinite(a).all() and np.isfinite(b).all()):
+        raise ValueError("features contain NaN or infinite values")
+    mu_a, mu_b = a.mean(0), b.mean(0)
+    cov_a, cov_b = np.atleast_2d(np.cov(a, rowvar=False)), np.atleast_2d(np.cov(b, rowvar=False))
+    # tr((C_a C_b)^(1/2)) = sum of sqrt of the eigenvalues of C_a^(1/2) C_b C_a^(1/2) (symmetric, PSD).
+    w, v = np.linalg.eigh(cov_a)
+    root_a = (v * np.sqrt(np.clip(w, 0, None))) @ v.T
+    cross = np.linalg.eigvalsh(root_a @ cov_b @ root_a)
+    trace_sqrt = np.sqrt(np.clip(cross, 0, None)).sum()
+    return float(((mu_a - mu_b) ** 2).sum() + np.trace(cov_a) + np.trace(cov_b) - 2 * trace_sqrt)
+
+
+def diversity(features, num_pairs=200, seed=0):
+    """Diversity as in Action2Motion / ACTOR / MDM: mean distance between the features of
+    ``num_pairs`` random pairs of generated sequences (whatever their labels)."""
+    f = np.asarray(features, dtype=np.float64)
+    rng = np.random.default_rng(seed)
+    i, j = rng.integers(0, len(f), num_pairs), rng.integers(0, len(f), num_pairs)
+    keep = i != j
+    return float(np.linalg.norm(f[i[keep]] - f[j[keep]], axis=1).mean())
+
+
+def multimodality(features, labels, num_pairs=20, seed=0):
+    """Multimodality as in Action2Motion / ACTOR / MDM: for each label, mean feature distance of
+    ``num_pairs`` random pairs of sequences generated for that label; averaged over labels."""
+    f, y = np.asarray(features, dtype=np.float64), np.asarray(labels)
+    rng = np.random.default_rng(seed)
+    per_label = []
+    for label in np.unique(y):
+        members = np.flatnonzero(y == label)
+        if len(members) < 2:
+            continue
+        i, j = rng.choice(members, num_pairs), rng.choice(members, num_pairs)
+        keep = i != j
+        per_label.append(np.linalg.norm(f[i[keep]] - f[j[keep]], axis=1).mean())
+    if not per_label:
+        raise ValueError("multimodality needs at least 2 sequences for some label")
+    return float(np.mean(per_label))

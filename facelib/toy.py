@@ -11,7 +11,7 @@ import torch
 from torch import nn
 from tqdm.auto import tqdm
 
-from .models.denoiser import sinusoidal_embedding
+from .models.bit import sinusoidal_embedding
 
 
 def smiley(n, seed=0, noise=0.025):

@@ -1,4 +1,5 @@
-"""Training loops (``python -m facelib train NAME``): the DDPM denoiser of §3.1 / §4.
+"""Training loops (``python -m facelib train NAME``): the DDPM denoiser of §3.1 / §4, the
+guidance classifiers of §3.2 (Alg. 1) and the independent classifiers of the evaluation (§5).
 
 Paper §4: T = 2000, linear betas 1e-4..0.02, 200K iterations, learning rate 1e-4, batch 256.
 A CPU budget of about 20 minutes on 2 cores allows about 1/50 of that compute, so we train a
@@ -6,6 +7,12 @@ smaller transformer (:class:`~facelib.models.denoiser.DenoiserConfig`) for fewer
 with a higher learning rate (warm-up, then cosine decay) and keep an exponential moving
 average (EMA) of the weights, which gives visibly cleaner samples for short runs.  Chapter 03
 shows the loss curve and what the shorter training costs.
+
+Anatomy augmentation (our addition): CoMA-like data has only 9 training faces, so a DDPM
+trained on it alone can only draw those 9 anatomies.  With probability ``anatomy_swap`` a
+training sequence has its subject's neutral landmarks replaced by those of another training
+face from ``anatomy_pool`` (x - N_subject + N_other, in every frame): the motion is kept, the
+anatomy is new.  Only training splits enter the pool, so no test face leaks into training.
 """
 from __future__ import annotations
 
@@ -20,7 +27,9 @@ from tqdm.auto import tqdm
 from . import config, data
 from .checkpoints import save_checkpoint
 from .diffusion import GaussianDiffusion, named_betas
+from .models.classifier import train_classifier
 from .models.denoiser import Denoiser, DenoiserConfig
+from .models.noisy_classifier import NoisyClassifier, NoisyClassifierConfig
 
 
 @dataclass(frozen=True)
@@ -38,12 +47,30 @@ class DenoiserTraining:
     ema_decay: float = 0.999  # our choice: EMA of the weights, used for sampling
     num_diffusion_steps: int = 2000  # paper §4: T = 2000
     schedule: str = "linear"  # paper §4: linear betas from 1e-4 to 0.02
+    anatomy_pool: tuple = ("coma", "bu")  # our choice: training faces of these datasets (9 + 81)
+    anatomy_swap: float = 0.5  # our choice: probability that a sequence gets another anatomy
     seed: int = 0
     model: DenoiserConfig = field(default_factory=DenoiserConfig)
 
     def __post_init__(self):
         if (self.model.num_diffusion_steps, self.model.schedule) != (self.num_diffusion_steps, self.schedule):
             raise ValueError("the denoiser's schedule must match the training schedule")
+        if not 0 <= self.anatomy_swap <= 1:
+            raise ValueError(f"anatomy_swap is a probability in [0, 1], got {self.anatomy_swap}")
+
+
+def training_anatomies(datasets):
+    """Neutral landmarks (K, 68, 3) in mm of every training subject of the given datasets."""
+    return np.concatenate([data.load_dataset(name, "train").subject_neutrals() for name in datasets])
+
+
+def swap_anatomy(x, own, pool, swap, generator):
+    """Anatomy augmentation: x (B, F, 68, 3) minus each sequence's own neutral frame ``own``
+    (B, 68, 3), plus a random neutral frame of ``pool`` (K, 68, 3), with probability ``swap``."""
+    other = pool[torch.randint(0, len(pool), (len(x),), generator=generator)]
+    keep = torch.rand(len(x), generator=generator) >= swap
+    shift = torch.where(keep[:, None, None], torch.zeros_like(own), other - own)
+    return x + shift[:, None]
 
 
 def _learning_rate(cfg, step):
@@ -62,10 +89,14 @@ def train_denoiser(cfg=DenoiserTraining(), progress=True, log_every=50):
     x_all = torch.as_tensor(normalizer.normalize(train.landmarks))
     mask_all = torch.arange(x_all.shape[1])[None, :] < torch.as_tensor(train.lengths)[:, None]
     x_all = x_all * mask_all[:, :, None, None]
+    own = torch.as_tensor(np.stack([train.neutral_landmarks(int(s)) for s in train.subjects])) / normalizer.scale
+    pool = torch.as_tensor(training_anatomies(cfg.anatomy_pool) if cfg.anatomy_swap > 0 else np.zeros((1, 68, 3))) / normalizer.scale
+    pool = pool.float()
     variable = not isinstance(cfg.num_frames, int)
     diffusion = GaussianDiffusion(named_betas(cfg.schedule, cfg.num_diffusion_steps))
     model = Denoiser(cfg.model)
-    frames = torch.cat([x_all[i, :n] for i, n in enumerate(train.lengths)])
+    swapped = swap_anatomy(x_all, own, pool, cfg.anatomy_swap, gen)  # the prior sees augmented frames too
+    frames = torch.cat([seqs[i, :n] for seqs in (x_all, swapped) for i, n in enumerate(train.lengths)])
     model.fit_prior(frames)
     ema = Denoiser(cfg.model)
     ema.load_state_dict(model.state_dict())
@@ -78,7 +109,8 @@ def train_denoiser(cfg=DenoiserTraining(), progress=True, log_every=50):
             g["lr"] = _learning_rate(cfg, step)
         idx = torch.randint(0, len(x_all), (cfg.batch_size,), generator=gen)
         mask = mask_all[idx] if variable else None
-        loss = diffusion.training_loss(model, x_all[idx], generator=gen, mask=mask)
+        x0 = swap_anatomy(x_all[idx], own[idx], pool, cfg.anatomy_swap, gen) * mask_all[idx][:, :, None, None]
+        loss = diffusion.training_loss(model, x0, generator=gen, mask=mask)
         opt.zero_grad(set_to_none=True)
         loss.backward()
         torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip)
@@ -106,6 +138,106 @@ def train_and_save(cfg, name=None, progress=True):
     model, normalizer, history = train_denoiser(cfg, progress=progress)
     training = asdict(cfg)
     training["num_frames"] = cfg.num_frames if isinstance(cfg.num_frames, int) else list(cfg.num_frames)
+    training["anatomy_pool"] = list(cfg.anatomy_pool)
     return save_checkpoint(name or checkpoint_name(cfg), model, "denoiser", asdict(cfg.model),
                            training=training, normalizer=normalizer.to_dict(), history=history,
                            torch_version=torch.__version__, data_dir=str(config.SYNTHETIC_DIR.name))
+
+
+@dataclass(frozen=True)
+class GuideTraining:
+    """How the shipped guidance classifiers p_phi(y | x_t, t) are trained (Alg. 1; our choices)."""
+
+    dataset: str = "coma"
+    classifier_type: str = "I"  # paper §5.1: type I for label control, type S for Alg. 4
+    steps: int = 3000  # our choice: ~3 min on 2 CPU cores; accuracy vs t is shown in chapter 05
+    batch_size: int = 64
+    lr: float = 3e-4
+    warmup: int = 200
+    weight_decay: float = 0.01
+    grad_clip: float = 1.0
+    num_diffusion_steps: int = 2000  # the DDPM's schedule (paper §4): x_t must look like the sampler's
+    schedule: str = "linear"
+    seed: int = 0
+    model: NoisyClassifierConfig = None  # default: NoisyClassifierConfig(num_classes of the type)
+
+
+def train_guide(cfg=GuideTraining(), progress=True, log_every=50):
+    """Train p_phi(y | x_t, t) with cross-entropy on x_t = q_sample(x_0, t), t ~ U{0..T}.
+
+    Returns (model, normalizer, history); the normalizer is the denoiser's (fitted on the same split)."""
+    data.check_classifier_type(cfg.classifier_type)
+    torch.manual_seed(cfg.seed)
+    gen = torch.Generator().manual_seed(cfg.seed)
+    train = data.load_dataset(cfg.dataset, "train")
+    normalizer = data.LandmarkNormalizer.fit(train)
+    x_all = torch.as_tensor(normalizer.normalize(train.landmarks))
+    y_all = torch.as_tensor(train.targets(cfg.classifier_type))
+    model_cfg = cfg.model or NoisyClassifierConfig(num_classes=len(train.class_names(cfg.classifier_type)))
+    diffusion = GaussianDiffusion(named_betas(cfg.schedule, cfg.num_diffusion_steps))
+    model = NoisyClassifier(model_cfg)
+    opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+    history = {"step": [], "loss": [], "accuracy": [], "seconds": []}
+    running, correct, t0 = [], [], time.perf_counter()
+    model.train()
+    for step in tqdm(range(cfg.steps), desc=f"train guide ({cfg.dataset}, type {cfg.classifier_type})",
+                     disable=not progress):
+        for g in opt.param_groups:
+            g["lr"] = _learning_rate(cfg, step)
+        idx = torch.randint(0, len(x_all), (cfg.batch_size,), generator=gen)
+        t = torch.randint(0, cfg.num_diffusion_steps + 1, (cfg.batch_size,), generator=gen)
+        xt = diffusion.q_sample(x_all[idx], t, generator=gen)
+        logits = model(xt, t.float())
+        loss = torch.nn.functional.cross_entropy(logits, y_all[idx])
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip)
+        opt.step()
+        running.append(loss.item())
+        correct.append((logits.argmax(1) == y_all[idx]).float().mean().item())
+        if (step + 1) % log_every == 0 or step + 1 == cfg.steps:
+            history["step"].append(step + 1)
+            history["loss"].append(float(np.mean(running)))
+            history["accuracy"].append(float(np.mean(correct)))
+            history["seconds"].append(time.perf_counter() - t0)
+            running, correct = [], []
+    return model.eval(), normalizer, history
+
+
+def train_and_save_guide(cfg=GuideTraining(), name=None, progress=True):
+    """Train a guidance classifier and save it as guide_<dataset>_<type> in data/checkpoints."""
+    model, normalizer, history = train_guide(cfg, progress=progress)
+    training = asdict(cfg)
+    training["model"] = asdict(model.config)
+    return save_checkpoint(name or f"guide_{cfg.dataset}_{cfg.classifier_type}", model, "guide",
+                           asdict(model.config), training=training, normalizer=normalizer.to_dict(),
+                           class_names=list(data.load_dataset(cfg.dataset, "train").class_names(cfg.classifier_type)),
+                           history=history, torch_version=torch.__version__)
+
+
+@dataclass(frozen=True)
+class EvaluatorTraining:
+    """How the independent classifiers (IC, paper §5) are trained: the recipe of chapter 01."""
+
+    dataset: str = "coma"
+    classifier_type: str = "I"
+    epochs: int = 30
+    batch_size: int = 32
+    lr: float = 1e-3
+    hidden: int = 128
+    inputs: str = "motion"  # chapter 01: motion generalises to unseen faces, absolute does not
+    seed: int = 0
+
+
+def train_and_save_evaluator(cfg=EvaluatorTraining(), name=None, progress=True):
+    """Train the IC of a dataset and type on its training split; save it as ic_<dataset>_<type>."""
+    data.check_classifier_type(cfg.classifier_type)
+    train = data.load_dataset(cfg.dataset, "train")
+    names = train.class_names(cfg.classifier_type)
+    model, losses = train_classifier(train.landmarks, train.targets(cfg.classifier_type), len(names),
+                                     epochs=cfg.epochs, batch_size=cfg.batch_size, lr=cfg.lr, seed=cfg.seed,
+                                     inputs=cfg.inputs, hidden=cfg.hidden, progress=progress)
+    config = {"num_classes": len(names), "hidden": cfg.hidden, "num_landmarks": 68, "inputs": cfg.inputs}
+    return save_checkpoint(name or f"ic_{cfg.dataset}_{cfg.classifier_type}", model, "evaluator", config,
+                           training=asdict(cfg), class_names=list(names), history={"loss": losses.tolist()},
+                           torch_version=torch.__version__)

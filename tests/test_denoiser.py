@@ -140,3 +140,29 @@ def test_gaussian_estimate_is_the_optimal_noise_estimate_for_gaussian_frames():
 def test_denoiser_rejects_bad_shapes(shape, t_shape, message):
     with pytest.raises(ValueError, match=message):
         Denoiser(SMALL)(torch.zeros(shape), torch.zeros(t_shape))
+
+
+def test_anatomy_augmentation_keeps_the_motion_and_swaps_the_neutral_face(coma_train):
+    from facelib.train import swap_anatomy, training_anatomies
+    pool = torch.as_tensor(training_anatomies(("coma", "bu")))
+    assert pool.shape == (9 + 81, 68, 3)
+    x = torch.as_tensor(coma_train.landmarks[:6])
+    own = torch.as_tensor(np.stack([coma_train.neutral_landmarks(int(s)) for s in coma_train.subjects[:6]]))
+    gen = torch.Generator().manual_seed(0)
+    assert torch.equal(swap_anatomy(x, own, pool, 0.0, gen), x)
+    swapped = swap_anatomy(x, own, pool, 1.0, gen)
+    shift = swapped - x
+    assert torch.allclose(shift, shift[:, :1].expand_as(shift), atol=1e-4)  # the same offset in every frame
+    new_neutral = own + shift[:, 0]
+    dist = (new_neutral[:, None] - pool[None]).norm(dim=-1).mean(-1).min(1).values
+    assert (dist < 1e-4).all()  # the new neutral face is one of the pool's
+
+
+def test_rig_fit_recovers_a_known_face(coma_train):
+    from facelib import rig_fit
+    seq = coma_train.landmarks[3]
+    face = coma_train.face(int(coma_train.subjects[3]))
+    meshes, rmse = rig_fit.landmarks_to_meshes(seq, [face])
+    assert meshes.shape == (40, coma_train.meshes(3).shape[1], 3)
+    assert rmse < 0.6  # about the capture noise of the landmarks
+    assert np.linalg.norm(meshes - coma_train.meshes(3), axis=-1).mean() < 0.3

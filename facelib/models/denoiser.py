@@ -1,16 +1,10 @@
 """The noise approximator eps_theta(x_t, t) of the paper (§3.1, Fig. 1): a bidirectional transformer.
 
-Each frame of x_t (68 x 3 landmark coordinates, normalised) becomes one token.  The input of the
-transformer is the sum of three embeddings (Fig. 1):
-
-* FE(x_t)     feature embedding: one linear layer per frame, 204 -> width;
-* PE(1..F)    positional encoding of the frame index (sinusoidal, so any length F works);
-* TE(t)       temporal (diffusion-step) embedding: sinusoidal, then a 2-layer MLP.
-
-The encoder is *bidirectional*: no causal mask, every frame attends to every other frame, past
-and future, which is what expression filling (chapter 07) needs.  Padded frames of a batch of
-mixed lengths are excluded with a key padding mask.  A linear layer maps each token back to 204
-numbers, the noise estimate of that frame.
+The tokens are FE(x_t) + PE(1..F) + TE(t), one per frame (models/bit.py); the encoder is
+bidirectional: every frame attends to every other frame, past and future, which is what
+expression filling (chapter 07) needs.  Padded frames of a batch of mixed lengths are excluded
+with a key padding mask.  A linear layer maps each output token back to 204 numbers, the noise
+estimate of that frame.
 
 One addition of ours, measured in chapter 03: a token is narrower (128) than a frame (204 numbers),
 so a plain transformer cannot even pass the noise through at large t (its loss stalls at the
@@ -25,22 +19,13 @@ output layer starts at zero, so training starts from the best linear per-frame d
 """
 from __future__ import annotations
 
-import math
 from dataclasses import asdict, dataclass
 
 import torch
 from torch import nn
 
 from ..diffusion import named_betas
-
-
-def sinusoidal_embedding(positions, dim, max_period=10_000.0):
-    """Transformer sinusoids of (possibly fractional) positions (...,) -> (..., dim)."""
-    half = dim // 2
-    freqs = torch.exp(-math.log(max_period) * torch.arange(half, dtype=torch.float32, device=positions.device) / half)
-    args = positions.float()[..., None] * freqs
-    emb = torch.cat([torch.sin(args), torch.cos(args)], dim=-1)
-    return torch.nn.functional.pad(emb, (0, dim % 2))
+from .bit import BiT, check_sequence_input
 
 
 @dataclass(frozen=True)
@@ -58,20 +43,14 @@ class DenoiserConfig:
     schedule: str = "linear"
 
 
-class Denoiser(nn.Module):
+class Denoiser(BiT):
     """eps_theta(x_t, t): (B, F, 68, 3) normalised landmarks, (B,) steps -> (B, F, 68, 3) noise."""
 
     def __init__(self, config=DenoiserConfig()):
-        super().__init__()
-        self.config = config
         c = config
+        super().__init__(c.num_landmarks, c.width, c.depth, c.heads, c.ff, c.dropout)
+        self.config = config
         features = c.num_landmarks * 3
-        self.fe = nn.Linear(features, c.width)
-        self.te = nn.Sequential(nn.Linear(c.width, c.width), nn.SiLU(), nn.Linear(c.width, c.width))
-        layer = nn.TransformerEncoderLayer(c.width, c.heads, c.ff, c.dropout, activation="gelu",
-                                           batch_first=True, norm_first=True)
-        self.encoder = nn.TransformerEncoder(layer, c.depth, enable_nested_tensor=False)
-        self.norm = nn.LayerNorm(c.width)
         self.out = nn.Linear(c.width, features)
         if c.gaussian_skip:
             nn.init.zeros_(self.out.weight)
@@ -100,21 +79,9 @@ class Denoiser(nn.Module):
 
     def forward(self, xt, t, mask=None):
         """Noise estimate for x_t at steps t; ``mask`` (B, F) bool marks the valid frames."""
-        if xt.ndim != 4 or xt.shape[2:] != (self.config.num_landmarks, 3):
-            raise ValueError(f"x_t must have shape (batch, frames, {self.config.num_landmarks}, 3), got {tuple(xt.shape)}")
-        if t.shape != (xt.shape[0],):
-            raise ValueError(f"t must have shape ({xt.shape[0]},) (one step per sequence), got {tuple(t.shape)}")
-        if mask is not None and mask.shape != xt.shape[:2]:
-            raise ValueError(f"mask must have shape {tuple(xt.shape[:2])}, got {tuple(mask.shape)}")
-        b, f = xt.shape[:2]
-        t = t.to(xt.device)
-        frames = torch.arange(1, f + 1, device=xt.device)
-        h = (self.fe(xt.reshape(b, f, -1))
-             + sinusoidal_embedding(frames, self.config.width)[None]
-             + self.te(sinusoidal_embedding(t, self.config.width))[:, None])
-        h = self.encoder(h, src_key_padding_mask=None if mask is None else ~mask)
-        eps = self.out(self.norm(h)).reshape(xt.shape)
-        return eps + self.gaussian_eps(xt, t) if self.config.gaussian_skip else eps
+        check_sequence_input(xt, t, mask, self.config.num_landmarks)
+        eps = self.out(self.encode(xt, t, mask)).reshape(xt.shape)
+        return eps + self.gaussian_eps(xt, t.to(xt.device)) if self.config.gaussian_skip else eps
 
     def config_dict(self):
         return asdict(self.config)

@@ -1,0 +1,65 @@
+"""The label-conditioned generative baselines of Table 1 (chapter 05), trained on the same data:
+
+* "motion3dgan": Motion3DGAN-style WGAN-GP on SRVFs (models/motion3dgan.py; the paper's "MoGAN");
+* "actor": ACTOR-style transformer CVAE (models/actor.py).
+
+``python -m facelib train motion3dgan --dataset coma`` (or ``actor``) retrains one; the shipped
+checkpoints are ``<name>_<dataset>`` in data/checkpoints.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, replace
+
+import numpy as np
+import torch
+
+from . import data
+from .checkpoints import load_checkpoint, save_checkpoint
+from .models import actor, motion3dgan
+
+BASELINES = {
+    "motion3dgan": (motion3dgan, motion3dgan.Motion3DGANTraining, motion3dgan.train_motion3dgan),
+    "actor": (actor, actor.ActorTraining, actor.train_actor),
+}
+
+
+def check_baseline(name):
+    if name not in BASELINES:
+        raise ValueError(f"unknown baseline {name!r}; allowed: {', '.join(BASELINES)}")
+    return BASELINES[name]
+
+
+def train_and_save_baseline(name, dataset="coma", steps=None, seed=0, out=None, progress=True):
+    """Train a baseline on the training split of ``dataset`` and save it as <name>_<dataset>."""
+    module, training, train = check_baseline(name)
+    data.check_dataset_name(dataset)
+    cfg = training(dataset=dataset, seed=seed)
+    if steps:
+        cfg = replace(cfg, steps=steps)
+    model, history = train(cfg, progress=progress)
+    label_names = list(data.load_dataset(dataset, "train").label_names)
+    return save_checkpoint(out or f"{name}_{dataset}", model, name, module.config_dict(model),
+                           training=asdict(cfg), label_names=label_names, history=history,
+                           torch_version=torch.__version__)
+
+
+def load_baseline(name, dataset="coma", checkpoint=None):
+    """Load a shipped baseline (sha256 checked); ``model.label_names`` lists its labels."""
+    module, _, _ = check_baseline(name)
+    data.check_dataset_name(dataset)
+    checkpoint = checkpoint or f"{name}_{dataset}"
+    model, meta = load_checkpoint(checkpoint, name, module.build)
+    expected = list(data.load_dataset(dataset, "train").label_names)
+    if meta["label_names"] != expected:
+        raise ValueError(f"checkpoint {checkpoint} generates {meta['label_names']}, dataset {dataset!r} has {expected}")
+    model.label_names, model.meta = tuple(expected), meta
+    return model
+
+
+def generate(model, labels, seed=0):
+    """Sequences (n, F, 68, 3) float32 in mm from a baseline, one per label name in ``labels``."""
+    labels = [labels] if isinstance(labels, str) else list(labels)
+    bad = [y for y in labels if y not in model.label_names]
+    if bad or not labels:
+        raise ValueError(f"unknown label {bad[0] if bad else None!r}; allowed: {', '.join(model.label_names)}")
+    return model.generate(np.array([model.label_names.index(y) for y in labels]), seed=seed)

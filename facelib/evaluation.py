@@ -1,0 +1,93 @@
+"""The paper's evaluation protocol (§5): an independent classifier (IC) scores generated sequences.
+
+* IC: one LSTM layer + a linear layer (models/classifier.py), trained on the training split and
+  never used for guidance; of type "I" (label) or "S" (label x N2E/E2N).
+* Accuracy: how often the IC recognises the requested class in the generated sequences.
+* FID: Fréchet distance between IC features of generated and of training sequences.  The paper
+  computes it "from the output of the linear layer of the IC": the class logits, which we use too
+  (12 numbers for 12 labels; a feature space where only what the IC learned to tell apart counts).
+* Diversity and multimodality (Action2Motion, ACTOR, MDM) on the same features.
+* The "ground truth" row: the held-out test sequences scored exactly like generated ones, i.e. what
+  an ideal generator that reproduced the test set would get.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from . import data, metrics
+from .checkpoints import load_checkpoint
+from .models.classifier import LSTMClassifier
+
+
+@dataclass
+class Evaluator:
+    """An IC with the training-set features that FID compares against."""
+
+    model: LSTMClassifier
+    dataset: str
+    classifier_type: str
+    class_names: tuple
+    reference_features: np.ndarray  # IC features (logits) of the training sequences
+
+    @torch.no_grad()
+    def features(self, sequences, batch_size=256):
+        """Output of the IC's linear layer (n, num_classes) for sequences (n, F, 68, 3) in mm."""
+        x = torch.as_tensor(check_sequences(sequences), dtype=torch.float32)
+        return torch.cat([self.model(x[i:i + batch_size]) for i in range(0, len(x), batch_size)]).numpy()
+
+    def score(self, sequences, targets, seed=0):
+        """Accuracy (%), FID, diversity and multimodality of sequences generated for ``targets``."""
+        targets = np.asarray(targets)
+        if targets.shape != (len(sequences),):
+            raise ValueError(f"need one target per sequence: {len(sequences)} sequences, targets {targets.shape}")
+        f = self.features(sequences)
+        return {"accuracy": 100 * metrics.accuracy(f.argmax(1), targets),
+                "fid": metrics.frechet_distance(f, self.reference_features),
+                "diversity": metrics.diversity(f, seed=seed),
+                "multimodality": metrics.multimodality(f, targets, seed=seed)}
+
+    def ground_truth(self, seed=0):
+        """The GT row: the held-out test sequences scored like generated ones."""
+        test = data.load_dataset(self.dataset, "test")
+        return self.score(test.landmarks, test.targets(self.classifier_type), seed=seed)
+
+    def class_index(self, name):
+        """Index of a class name; a clear error listing the valid names otherwise."""
+        if name not in self.class_names:
+            raise ValueError(f"unknown class {name!r} for dataset {self.dataset!r} (type {self.classifier_type}); "
+                             f"allowed: {', '.join(self.class_names)}")
+        return self.class_names.index(name)
+
+
+def check_sequences(sequences):
+    """Validate landmark sequences (n, F, 68, 3), finite; returns a float32 array."""
+    x = np.asarray(sequences, dtype=np.float32)
+    if x.ndim != 4 or x.shape[2:] != (68, 3) or len(x) == 0:
+        raise ValueError(f"expected landmark sequences of shape (n, frames, 68, 3), got {x.shape}")
+    if not np.isfinite(x).all():
+        raise ValueError("landmark sequences contain NaN or infinite values")
+    return x
+
+
+def check_class_names(meta_names, dataset, classifier_type, checkpoint):
+    """A classifier must predict exactly the classes of the dataset it is used with."""
+    expected = data.load_dataset(dataset, "train").class_names(classifier_type)
+    if tuple(meta_names) != tuple(expected):
+        raise ValueError(f"checkpoint {checkpoint} predicts {list(meta_names)}, but dataset {dataset!r} "
+                         f"(type {classifier_type}) has classes {list(expected)}")
+    return expected
+
+
+def load_evaluator(dataset="coma", classifier_type="I", name=None):
+    """Load the shipped IC ic_<dataset>_<type> (sha256 checked) and the training features for FID."""
+    data.check_dataset_name(dataset)
+    data.check_classifier_type(classifier_type)
+    name = name or f"ic_{dataset}_{classifier_type}"
+    model, meta = load_checkpoint(name, "evaluator", lambda c: LSTMClassifier(**c))
+    names = check_class_names(meta["class_names"], dataset, classifier_type, name)
+    evaluator = Evaluator(model, dataset, classifier_type, names, np.zeros((0, len(names))))
+    evaluator.reference_features = evaluator.features(data.load_dataset(dataset, "train").landmarks)
+    return evaluator

@@ -1,0 +1,202 @@
+"""Motion3DGAN-style baseline (papers/motion3dgan-s2d-otberdout2022, §3.2, Eq. 2-7): a
+label-conditioned WGAN-GP that generates the SRVF of a landmark motion on the unit hypersphere.
+
+* Each training motion is turned into its unit-norm SRVF q (facelib/srvf.py, Eq. 2); E2N motions
+  are first reversed in time, so every motion starts near the neutral face, as in that paper.
+* The GAN works in the tangent space at p, the *renormalised* mean SRVF (Eq. 6): the generator
+  G(z, c) outputs a tangent vector (projected orthogonal to p), q_fake = exp_p(G); the critic
+  D(log_p(q), c) is trained with the Wasserstein loss and gradient penalty (Eq. 4-5, lambda = 10);
+  the generator adds alpha_2 L_r, the L1 distance between log_p(q_fake) and log_p(q) of a random
+  real motion of the same class (Eq. 7; the pairing is not specified in the paper).
+* Decoding (Eq. 3, 10): alpha(0) = the neutral landmarks of a training face, eps = the class's
+  mean arc length; a motion is reversed back to E2N with the class's E2N frequency.
+
+Architecture (not given in the paper, which points to MotionGAN): 1-D convolutions over time,
+small enough to ship (our choice).  Adam lr 1e-4, alpha_1 = 1, alpha_2 = 10 (paper); n_critic = 5,
+betas (0.5, 0.9) (WGAN-GP defaults).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass
+
+import numpy as np
+import torch
+from torch import nn
+from tqdm.auto import tqdm
+
+from .. import data, srvf
+
+
+@dataclass(frozen=True)
+class Motion3DGANConfig:
+    num_classes: int
+    num_frames: int = 40
+    num_landmarks: int = 68
+    noise_dim: int = 128  # paper: 128-d noise
+    channels: int = 64  # our choice: a few minutes of CPU training
+
+
+class Generator(nn.Module):
+    """G(z, c): noise + one-hot label -> tangent vector (B, F-1, 204), in units of ``tangent_scale``."""
+
+    def __init__(self, c):
+        super().__init__()
+        self.c = c
+        self.seed_frames = (c.num_frames - 1 + 3) // 4
+        self.fc = nn.Linear(c.noise_dim + c.num_classes, c.channels * self.seed_frames)
+        self.body = nn.Sequential(
+            nn.LeakyReLU(0.2), nn.Upsample(scale_factor=2), nn.Conv1d(c.channels, c.channels, 5, padding=2),
+            nn.LeakyReLU(0.2), nn.Upsample(size=c.num_frames - 1), nn.Conv1d(c.channels, c.channels, 5, padding=2),
+            nn.LeakyReLU(0.2), nn.Conv1d(c.channels, c.num_landmarks * 3, 5, padding=2))
+
+    def forward(self, z, onehot):
+        h = self.fc(torch.cat([z, onehot], 1)).reshape(len(z), self.c.channels, self.seed_frames)
+        return self.body(h).transpose(1, 2)
+
+
+class Critic(nn.Module):
+    """D(log_p(q), c): tangent vector (B, F-1, 204) + one-hot label -> a score (B,)."""
+
+    def __init__(self, c):
+        super().__init__()
+        self.body = nn.Sequential(
+            nn.Conv1d(c.num_landmarks * 3 + c.num_classes, c.channels, 5, stride=2, padding=2), nn.LeakyReLU(0.2),
+            nn.Conv1d(c.channels, c.channels, 5, stride=2, padding=2), nn.LeakyReLU(0.2),
+            nn.Conv1d(c.channels, c.channels, 5, stride=2, padding=2), nn.LeakyReLU(0.2),
+            nn.AdaptiveAvgPool1d(1), nn.Flatten(), nn.Linear(c.channels, 1))
+
+    def forward(self, u, onehot):
+        h = torch.cat([u.transpose(1, 2), onehot[:, :, None].expand(-1, -1, u.shape[1])], 1)
+        return self.body(h)[:, 0]
+
+
+class Motion3DGAN(nn.Module):
+    """The generator with everything needed to decode: p, the tangent scale, per-class arc lengths
+    and E2N frequencies, and the neutral faces of the training subjects."""
+
+    def __init__(self, config, num_neutrals=1):
+        super().__init__()
+        c = self.config = config
+        self.generator = Generator(c)
+        d = c.num_landmarks * 3
+        self.register_buffer("reference", torch.zeros(c.num_frames - 1, d))  # p, on the sphere
+        self.register_buffer("tangent_scale", torch.ones(()))
+        self.register_buffer("arc_length", torch.ones(c.num_classes))  # mm, mean per class
+        self.register_buffer("e2n_fraction", torch.zeros(c.num_classes))
+        self.register_buffer("neutrals", torch.zeros(num_neutrals, c.num_landmarks, 3))
+
+    def tangent(self, z, onehot):
+        """G's tangent vector at p (B, F-1, 204), projected orthogonal to p."""
+        s = self.generator(z, onehot) * self.tangent_scale
+        return s - srvf.inner(s, self.reference)[:, None, None] * self.reference
+
+    @torch.no_grad()
+    def generate(self, labels, seed=0):
+        """Landmark sequences (n, F, 68, 3) float32 in mm for class indices ``labels`` (n,)."""
+        labels = torch.as_tensor(np.asarray(labels), dtype=torch.long)
+        gen = torch.Generator().manual_seed(seed)
+        n, c = len(labels), self.config
+        z = torch.randn(n, c.noise_dim, generator=gen)
+        q = srvf.exp_map(self.tangent(z, nn.functional.one_hot(labels, c.num_classes).float()), self.reference)
+        start = self.neutrals[torch.randint(0, len(self.neutrals), (n,), generator=gen)].flatten(1)
+        motion = srvf.from_srvf(q, start, self.arc_length[labels]).reshape(n, c.num_frames, c.num_landmarks, 3)
+        reverse = torch.rand(n, generator=gen) < self.e2n_fraction[labels]
+        motion[reverse] = motion[reverse].flip(1)
+        return motion.numpy().astype(np.float32)
+
+
+@dataclass(frozen=True)
+class Motion3DGANTraining:
+    dataset: str = "coma"
+    steps: int = 1500  # generator steps (our choice: a few minutes on a CPU core)
+    critic_steps: int = 5  # n_critic (WGAN-GP default; not given)
+    batch_size: int = 64
+    lr: float = 1e-4  # paper
+    gp_weight: float = 10.0  # lambda of Eq. 4 (WGAN-GP default; not given)
+    adversarial_weight: float = 1.0  # alpha_1 (paper)
+    reconstruction_weight: float = 10.0  # alpha_2 (paper)
+    seed: int = 0
+
+
+def prepare(train):
+    """Unit SRVFs (n, F-1, 204) of the training motions (E2N reversed), arc lengths (n,) in mm."""
+    motion = torch.as_tensor(train.landmarks).flatten(2)
+    e2n = torch.as_tensor(train.kinds == train.kind_names.index("E2N"))
+    motion = torch.where(e2n[:, None, None], motion.flip(1), motion)
+    return srvf.to_srvf(motion.double())
+
+
+def train_motion3dgan(cfg=Motion3DGANTraining(), progress=True, log_every=50):
+    """Train the WGAN-GP (Eq. 4-7); returns (Motion3DGAN, history)."""
+    torch.manual_seed(cfg.seed)
+    gen = torch.Generator().manual_seed(cfg.seed)
+    train = data.load_dataset(cfg.dataset, "train")
+    k = len(train.label_names)
+    model = Motion3DGAN(Motion3DGANConfig(num_classes=k, num_frames=train.landmarks.shape[1]),
+                        num_neutrals=len(np.unique(train.subjects)))
+    q, length = prepare(train)
+    p = srvf.reference_point(q)
+    real = srvf.log_map(q, p).float()
+    labels = torch.as_tensor(train.labels)
+    model.reference.copy_(p.float())
+    model.tangent_scale.fill_(float(real.std()))
+    model.arc_length.copy_(torch.stack([length[labels == y].mean() for y in range(k)]).float())
+    model.e2n_fraction.copy_(torch.as_tensor([np.mean(train.kinds[train.labels == y] == 1) for y in range(k)]).float())
+    model.neutrals.copy_(torch.as_tensor(train.subject_neutrals()))
+    critic = Critic(model.config)
+    opt_g = torch.optim.Adam(model.generator.parameters(), lr=cfg.lr, betas=(0.5, 0.9))
+    opt_d = torch.optim.Adam(critic.parameters(), lr=cfg.lr, betas=(0.5, 0.9))
+    by_class = [torch.nonzero(labels == y)[:, 0] for y in range(k)]
+    scale = model.tangent_scale
+    history = {"step": [], "critic": [], "generator": [], "seconds": []}
+    t0, run_d, run_g = time.perf_counter(), [], []
+
+    def fake_batch(y):
+        z = torch.randn(len(y), model.config.noise_dim, generator=gen)
+        return model.tangent(z, nn.functional.one_hot(y, k).float()) / scale
+
+    for step in tqdm(range(cfg.steps), desc=f"train Motion3DGAN ({cfg.dataset})", disable=not progress):
+        for _ in range(cfg.critic_steps):
+            idx = torch.randint(0, len(real), (cfg.batch_size,), generator=gen)
+            y, onehot = labels[idx], nn.functional.one_hot(labels[idx], k).float()
+            u_real = real[idx] / scale
+            with torch.no_grad():
+                u_fake = fake_batch(y)
+            tau = torch.rand(len(idx), 1, 1, generator=gen)
+            u_mix = ((1 - tau) * u_real + tau * u_fake).requires_grad_(True)
+            grad = torch.autograd.grad(critic(u_mix, onehot).sum(), u_mix, create_graph=True)[0]
+            penalty = ((grad.flatten(1).norm(dim=1) - 1) ** 2).mean()
+            loss_d = critic(u_fake, onehot).mean() - critic(u_real, onehot).mean() + cfg.gp_weight * penalty
+            opt_d.zero_grad()
+            loss_d.backward()
+            opt_d.step()
+        idx = torch.randint(0, len(real), (cfg.batch_size,), generator=gen)
+        y = labels[idx]
+        partner = torch.stack([by_class[int(c)][torch.randint(0, len(by_class[int(c)]), (1,), generator=gen)][0] for c in y])
+        u_fake = fake_batch(y)
+        loss_g = (-cfg.adversarial_weight * critic(u_fake, nn.functional.one_hot(y, k).float()).mean()
+                  + cfg.reconstruction_weight * (u_fake - real[partner] / scale).abs().mean())
+        opt_g.zero_grad()
+        loss_g.backward()
+        opt_g.step()
+        run_d.append(loss_d.item())
+        run_g.append(loss_g.item())
+        if (step + 1) % log_every == 0 or step + 1 == cfg.steps:
+            history["step"].append(step + 1)
+            history["critic"].append(float(np.mean(run_d)))
+            history["generator"].append(float(np.mean(run_g)))
+            history["seconds"].append(time.perf_counter() - t0)
+            run_d, run_g = [], []
+    return model.eval(), history
+
+
+def config_dict(model):
+    return asdict(model.config) | {"num_neutrals": len(model.neutrals)}
+
+
+def build(config):
+    """Rebuild a Motion3DGAN from a checkpoint config (see :func:`config_dict`)."""
+    c = dict(config)
+    num_neutrals = c.pop("num_neutrals")
+    return Motion3DGAN(Motion3DGANConfig(**c), num_neutrals)

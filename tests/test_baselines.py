@@ -1,0 +1,52 @@
+"""The generative baselines of Table 1: SRVF geometry (Motion3DGAN) and the shipped generators."""
+import numpy as np
+import pytest
+import torch
+
+from facelib import baselines, srvf
+
+
+def test_srvf_round_trip_and_unit_norm(coma_train):
+    motion = torch.as_tensor(coma_train.landmarks[:4]).flatten(2).double()
+    q, length = srvf.to_srvf(motion)
+    assert torch.allclose(srvf.norm(q), torch.ones(4, dtype=torch.float64))
+    back = srvf.from_srvf(q, motion[:, 0], length)
+    assert torch.allclose(back, motion, atol=1e-9)
+    # ||q||^2 before normalisation is the arc length of the motion
+    arc = torch.diff(motion, dim=1).norm(dim=-1).sum(1)
+    assert torch.allclose(length, arc, rtol=1e-9)
+
+
+def test_log_and_exp_maps_are_inverse_and_the_reference_must_be_renormalised(coma_train):
+    q, _ = srvf.to_srvf(torch.as_tensor(coma_train.landmarks[:50]).flatten(2).double())
+    plain_mean = q.mean(0)
+    assert srvf.norm(plain_mean) < 0.95  # the plain mean is not on the sphere
+    p = srvf.reference_point(q)
+    assert srvf.norm(p) == pytest.approx(1.0)
+    s = srvf.log_map(q, p)
+    assert torch.allclose(srvf.inner(s, p), torch.zeros(50, dtype=torch.float64), atol=1e-9)  # tangent at p
+    assert torch.allclose(srvf.exp_map(s, p), q, atol=1e-7)
+    assert torch.allclose(srvf.norm(s), torch.arccos(srvf.inner(q, p)), atol=1e-7)  # geodesic distance
+
+
+@pytest.mark.parametrize("name", ["motion3dgan", "actor"])
+def test_shipped_baselines_generate_deterministically(name):
+    model = baselines.load_baseline(name, "coma")
+    a = baselines.generate(model, ["high_smile", "mouth_open", "eyebrow"], seed=1)
+    b = baselines.generate(model, ["high_smile", "mouth_open", "eyebrow"], seed=1)
+    assert a.shape == (3, 40, 68, 3) and a.dtype == np.float32 and np.array_equal(a, b)
+    assert np.isfinite(a).all()
+    with pytest.raises(ValueError, match="allowed: bareteeth"):
+        baselines.generate(model, ["happy"])
+
+
+@pytest.mark.parametrize("name", ["motion3dgan", "actor"])
+def test_baseline_training_writes_a_loadable_checkpoint(tmp_path, name):
+    out = tmp_path / f"{name}_tiny"
+    baselines.train_and_save_baseline(name, "bu", steps=3, out=str(out), progress=False)
+    model = baselines.load_baseline(name, "bu", checkpoint=str(out))
+    assert baselines.generate(model, ["happy", "sad"]).shape == (2, 40, 68, 3)
+    with pytest.raises(ValueError, match="generates"):
+        baselines.load_baseline(name, "coma", checkpoint=str(out))  # trained on bu: other labels
+    with pytest.raises(ValueError, match="unknown baseline"):
+        baselines.load_baseline("gan", "coma")

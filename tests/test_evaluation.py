@@ -1,0 +1,78 @@
+"""The evaluation protocol of §5: FID, diversity, multimodality, classifier types, the shipped ICs."""
+import numpy as np
+import pytest
+
+from facelib import data, evaluation, metrics
+
+
+def test_frechet_distance_matches_the_closed_form_for_gaussians(rng):
+    # FID(N(m1, C1), N(m2, C2)) = |m1 - m2|^2 + tr(C1 + C2 - 2 (C1 C2)^1/2); diagonal case by hand.
+    d, n = 4, 200_000
+    s1, s2 = np.array([1.0, 2.0, 0.5, 1.5]), np.array([0.5, 1.0, 1.0, 3.0])
+    m2 = np.array([1.0, -1.0, 0.0, 2.0])
+    a = rng.normal(size=(n, d)) * s1
+    b = m2 + rng.normal(size=(n, d)) * s2
+    closed = (m2 ** 2).sum() + ((s1 - s2) ** 2).sum()
+    assert metrics.frechet_distance(a, b) == pytest.approx(closed, rel=0.02)
+
+
+def test_frechet_distance_is_zero_for_identical_sets_and_symmetric(rng):
+    a, b = rng.normal(size=(500, 6)), rng.normal(size=(400, 6)) @ rng.normal(size=(6, 6))
+    assert abs(metrics.frechet_distance(a, a)) < 1e-8
+    assert metrics.frechet_distance(a, b) == pytest.approx(metrics.frechet_distance(b, a), rel=1e-6)
+
+
+def test_frechet_distance_rejects_bad_input(rng):
+    with pytest.raises(ValueError, match="same d"):
+        metrics.frechet_distance(rng.normal(size=(10, 3)), rng.normal(size=(10, 4)))
+    bad = rng.normal(size=(10, 3))
+    bad[0, 0] = np.nan
+    with pytest.raises(ValueError, match="NaN"):
+        metrics.frechet_distance(bad, bad)
+
+
+def test_diversity_and_multimodality_scale_with_the_features(rng):
+    f = rng.normal(size=(100, 5))
+    y = rng.integers(0, 4, 100)
+    assert metrics.diversity(2 * f) == pytest.approx(2 * metrics.diversity(f))
+    assert metrics.multimodality(3 * f, y) == pytest.approx(3 * metrics.multimodality(f, y))
+    # features grouped tightly by label: multimodality far below diversity
+    grouped = 10 * np.eye(4)[y] + 0.01 * f
+    assert metrics.multimodality(grouped, y) < 0.01 * metrics.diversity(grouped)
+
+
+def test_classifier_types(coma_train):
+    names_i, names_s = coma_train.class_names("I"), coma_train.class_names("S")
+    assert len(names_s) == 2 * len(names_i) == 24
+    t_i, t_s = coma_train.targets("I"), coma_train.targets("S")
+    assert np.array_equal(t_s // 2, t_i) and np.array_equal(t_s % 2, coma_train.kinds)
+    assert names_s[t_s[0]].startswith(names_i[t_i[0]])
+    with pytest.raises(ValueError, match="classifier type"):
+        coma_train.targets("X")
+
+
+def test_shipped_evaluators_give_the_ground_truth_row():
+    ev = evaluation.load_evaluator("coma", "I")
+    gt = ev.ground_truth()
+    assert 70 < gt["accuracy"] <= 100 and gt["fid"] >= 0
+    train = data.load_dataset("coma", "train")
+    # the training set scored against itself: perfect FID, higher accuracy than the test set
+    own = ev.score(train.landmarks, train.targets("I"))
+    assert own["fid"] < 1e-6 and own["accuracy"] > gt["accuracy"]
+    # a broken generator (frames shuffled in time) is recognised as worse on both columns
+    shuffled = data.load_dataset("coma", "test")
+    perm = np.random.default_rng(0).permutation(shuffled.landmarks.shape[1])
+    bad = ev.score(shuffled.landmarks[:, perm], shuffled.targets("I"))
+    assert bad["fid"] > gt["fid"] and bad["accuracy"] < gt["accuracy"]
+
+
+def test_evaluator_errors():
+    ev = evaluation.load_evaluator("bu", "I")
+    with pytest.raises(ValueError, match="allowed: anger"):
+        ev.class_index("high_smile")
+    with pytest.raises(ValueError, match="one target per sequence"):
+        ev.score(np.zeros((3, 40, 68, 3)), [0, 1])
+    with pytest.raises(ValueError, match=r"\(n, frames, 68, 3\)"):
+        ev.features(np.zeros((3, 40, 60, 3)))
+    with pytest.raises(ValueError, match="has classes"):
+        evaluation.load_evaluator("coma", "I", name="ic_bu_I")
