@@ -13,7 +13,7 @@ import time
 import numpy as np
 import torch
 
-from facelib import evaluation, tasks
+from facelib import data, evaluation, tasks
 
 
 def main():
@@ -29,6 +29,10 @@ def main():
     print(f"cores: {os.cpu_count()}, torch threads: {torch.get_num_threads()}, dataset: {args.dataset}, "
           f"n = {args.n}, Adagrad lr {tasks.ADAGRAD_LR}, lambda 0.01")
     print(f"{'steps':>6}{'seconds':>10}{'ms/step':>9}{'Acc %':>8}{'FID':>8}")
+    test = data.load_dataset(args.dataset, "test")
+    pick = np.random.default_rng(0).choice(len(test), min(args.n, len(test)), replace=False)
+    gt = ev.score(test.landmarks[pick], test.targets("I")[pick])
+    print(f"{'GT':>6}{'':>10}{'':>9}{gt['accuracy']:>8.1f}{gt['fid']:>8.2f}   ({len(pick)} random test sequences)")
     for steps in args.steps:
         t0 = time.perf_counter()
         x = tasks.label_control(labels, args.n, steps=steps, seed=0, guide=guide, denoiser=denoiser, progress=False)

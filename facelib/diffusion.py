@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 import torch
-from tqdm.auto import tqdm
+from tqdm import tqdm
 
 VARIANCES = ("beta", "posterior")
 

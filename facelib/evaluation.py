@@ -64,7 +64,7 @@ class Evaluator:
 
 def check_sequences(sequences):
     """Validate landmark sequences (n, F, 68, 3), finite; returns a float32 array."""
-    x = np.asarray(sequences, dtype=np.float32)
+    x = np.ascontiguousarray(sequences, dtype=np.float32)
     if x.ndim != 4 or x.shape[2:] != (68, 3) or len(x) == 0:
         raise ValueError(f"expected landmark sequences of shape (n, frames, 68, 3), got {x.shape}")
     if not np.isfinite(x).all():

@@ -89,7 +89,8 @@ def frechet_distance(features_a, features_b):
     root_a = (v * np.sqrt(np.clip(w, 0, None))) @ v.T
     cross = np.linalg.eigvalsh(root_a @ cov_b @ root_a)
     trace_sqrt = np.sqrt(np.clip(cross, 0, None)).sum()
-    return float(((mu_a - mu_b) ** 2).sum() + np.trace(cov_a) + np.trace(cov_b) - 2 * trace_sqrt)
+    fid = ((mu_a - mu_b) ** 2).sum() + np.trace(cov_a) + np.trace(cov_b) - 2 * trace_sqrt
+    return float(max(fid, 0.0))  # >= 0 exactly; round-off can leave -1e-15 for identical sets
 
 
 def diversity(features, num_pairs=200, seed=0):

@@ -256,7 +256,6 @@ def _mirror(index):
 
 def _landmarks(canonical):
     """The 68 landmark vertices in iBUG-68 order (jaw 17, brows 10, nose 9, eyes 12, mouth 20)."""
-    left = {}  # subject's left side (x > 0); iBUG's right-hand points in the image
     idx = [None] * 68
     # Jaw line 0..16: from the right temple (image left) around the chin to the left temple.
     ys = np.linspace(24.0, -95.0, 9)
