@@ -17,7 +17,6 @@ anatomy is new.  Only training splits enter the pool, so no test face leaks into
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
@@ -30,6 +29,7 @@ from .diffusion import GaussianDiffusion, named_betas
 from .models.classifier import train_classifier
 from .models.denoiser import Denoiser, DenoiserConfig
 from .models.noisy_classifier import NoisyClassifier, NoisyClassifierConfig
+from .training_log import TrainingLog
 
 
 @dataclass(frozen=True)
@@ -102,8 +102,7 @@ def train_denoiser(cfg=DenoiserTraining(), progress=True, log_every=50):
     ema.load_state_dict(model.state_dict())
     ema.requires_grad_(False)
     opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
-    history = {"step": [], "loss": [], "seconds": []}
-    running, t0 = [], time.perf_counter()
+    log = TrainingLog(cfg.steps, log_every, "loss")
     for step in tqdm(range(cfg.steps), desc=f"train denoiser ({cfg.dataset})", disable=not progress):
         for g in opt.param_groups:
             g["lr"] = _learning_rate(cfg, step)
@@ -119,13 +118,8 @@ def train_denoiser(cfg=DenoiserTraining(), progress=True, log_every=50):
             decay = min(cfg.ema_decay, (1 + step) / (10 + step))
             for pe, pm in zip(ema.parameters(), model.parameters()):
                 pe.lerp_(pm, 1 - decay)
-        running.append(loss.item())
-        if (step + 1) % log_every == 0 or step + 1 == cfg.steps:
-            history["step"].append(step + 1)
-            history["loss"].append(float(np.mean(running)))
-            history["seconds"].append(time.perf_counter() - t0)
-            running = []
-    return ema.eval(), normalizer, history
+        log.add(step, loss=loss.item())
+    return ema.eval(), normalizer, log.history
 
 
 def checkpoint_name(cfg):
@@ -177,8 +171,7 @@ def train_guide(cfg=GuideTraining(), progress=True, log_every=50):
     diffusion = GaussianDiffusion(named_betas(cfg.schedule, cfg.num_diffusion_steps))
     model = NoisyClassifier(model_cfg)
     opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
-    history = {"step": [], "loss": [], "accuracy": [], "seconds": []}
-    running, correct, t0 = [], [], time.perf_counter()
+    log = TrainingLog(cfg.steps, log_every, "loss", "accuracy")
     model.train()
     for step in tqdm(range(cfg.steps), desc=f"train guide ({cfg.dataset}, type {cfg.classifier_type})",
                      disable=not progress):
@@ -193,15 +186,8 @@ def train_guide(cfg=GuideTraining(), progress=True, log_every=50):
         loss.backward()
         torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip)
         opt.step()
-        running.append(loss.item())
-        correct.append((logits.argmax(1) == y_all[idx]).float().mean().item())
-        if (step + 1) % log_every == 0 or step + 1 == cfg.steps:
-            history["step"].append(step + 1)
-            history["loss"].append(float(np.mean(running)))
-            history["accuracy"].append(float(np.mean(correct)))
-            history["seconds"].append(time.perf_counter() - t0)
-            running, correct = [], []
-    return model.eval(), normalizer, history
+        log.add(step, loss=loss.item(), accuracy=(logits.argmax(1) == y_all[idx]).float().mean().item())
+    return model.eval(), normalizer, log.history
 
 
 def train_and_save_guide(cfg=GuideTraining(), name=None, progress=True):

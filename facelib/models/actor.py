@@ -12,7 +12,6 @@
 """
 from __future__ import annotations
 
-import time
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -22,6 +21,7 @@ from tqdm import tqdm
 
 from .. import data
 from .bit import BiT, sinusoidal_embedding
+from ..training_log import TrainingLog
 
 
 @dataclass(frozen=True)
@@ -94,8 +94,7 @@ def train_actor(cfg=ActorTraining(), progress=True, log_every=50):
     model.neutrals.copy_(torch.as_tensor(train.subject_neutrals()))
     x_all = delta / model.scale
     opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr)
-    history = {"step": [], "reconstruction": [], "kl": [], "seconds": []}
-    t0, run_r, run_k = time.perf_counter(), [], []
+    log = TrainingLog(cfg.steps, log_every, "reconstruction", "kl")
     model.train()
     for step in tqdm(range(cfg.steps), desc=f"train ACTOR ({cfg.dataset})", disable=not progress):
         idx = torch.randint(0, len(x_all), (cfg.batch_size,), generator=gen)
@@ -108,15 +107,8 @@ def train_actor(cfg=ActorTraining(), progress=True, log_every=50):
         opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()
-        run_r.append(rec.item())
-        run_k.append(kl.item())
-        if (step + 1) % log_every == 0 or step + 1 == cfg.steps:
-            history["step"].append(step + 1)
-            history["reconstruction"].append(float(np.mean(run_r)))
-            history["kl"].append(float(np.mean(run_k)))
-            history["seconds"].append(time.perf_counter() - t0)
-            run_r, run_k = [], []
-    return model.eval(), history
+        log.add(step, reconstruction=rec.item(), kl=kl.item())
+    return model.eval(), log.history
 
 
 def config_dict(model):

@@ -17,7 +17,6 @@ betas (0.5, 0.9) (WGAN-GP defaults).
 """
 from __future__ import annotations
 
-import time
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -26,6 +25,7 @@ from torch import nn
 from tqdm import tqdm
 
 from .. import data, srvf
+from ..training_log import TrainingLog
 
 
 @dataclass(frozen=True)
@@ -149,8 +149,7 @@ def train_motion3dgan(cfg=Motion3DGANTraining(), progress=True, log_every=50):
     opt_d = torch.optim.Adam(critic.parameters(), lr=cfg.lr, betas=(0.5, 0.9))
     by_class = [torch.nonzero(labels == y)[:, 0] for y in range(k)]
     scale = model.tangent_scale
-    history = {"step": [], "critic": [], "generator": [], "seconds": []}
-    t0, run_d, run_g = time.perf_counter(), [], []
+    log = TrainingLog(cfg.steps, log_every, "critic", "generator")
 
     def fake_batch(y):
         z = torch.randn(len(y), model.config.noise_dim, generator=gen)
@@ -180,15 +179,8 @@ def train_motion3dgan(cfg=Motion3DGANTraining(), progress=True, log_every=50):
         opt_g.zero_grad()
         loss_g.backward()
         opt_g.step()
-        run_d.append(loss_d.item())
-        run_g.append(loss_g.item())
-        if (step + 1) % log_every == 0 or step + 1 == cfg.steps:
-            history["step"].append(step + 1)
-            history["critic"].append(float(np.mean(run_d)))
-            history["generator"].append(float(np.mean(run_g)))
-            history["seconds"].append(time.perf_counter() - t0)
-            run_d, run_g = [], []
-    return model.eval(), history
+        log.add(step, critic=loss_d.item(), generator=loss_g.item())
+    return model.eval(), log.history
 
 
 def config_dict(model):
