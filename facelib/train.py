@@ -38,7 +38,7 @@ class DenoiserTraining:
 
     dataset: str = "coma"  # paper §4: "unless otherwise specified, solely CoMA"
     num_frames: object = 40  # paper §4: 40 frames; (35, 45) for the variable-length model of App. A
-    steps: int = 12_000  # our choice: ~17 min on 2 CPU cores (paper: 200K iterations)
+    steps: int = 12_000  # our choice: ~19 min on 2 CPU cores (paper: 200K iterations)
     batch_size: int = 64  # our choice (paper: 256): CPU time per step
     lr: float = 5e-4  # our choice (paper: 1e-4): 13x fewer, 4x smaller steps need a larger rate
     warmup: int = 500  # our choice: linear warm-up steps, then cosine decay to lr / 20
