@@ -44,19 +44,19 @@ def _train(args):
     from . import train
     if args.name not in TRAINABLE:
         raise ValueError(f"unknown model {args.name!r}; allowed: {', '.join(TRAINABLE)}")
+
+    def with_steps(cfg):  # a shorter (or longer) run keeps the warm-up at most a tenth of it
+        return replace(cfg, steps=args.steps, warmup=min(cfg.warmup, args.steps // 10)) if args.steps else cfg
+
     t0 = time.perf_counter()
     if args.name == "denoiser":
         cfg = train.DenoiserTraining(dataset=args.dataset, seed=args.seed)
         if args.variable_length:
             cfg = replace(cfg, num_frames=(35, 45))
-        if args.steps:
-            cfg = replace(cfg, steps=args.steps, warmup=min(cfg.warmup, args.steps // 10))
-        pt, js = train.train_and_save(cfg, name=args.out)
+        pt, js = train.train_and_save(with_steps(cfg), name=args.out)
     elif args.name == "guide":
         cfg = train.GuideTraining(dataset=args.dataset, classifier_type=args.type, seed=args.seed)
-        if args.steps:
-            cfg = replace(cfg, steps=args.steps, warmup=min(cfg.warmup, args.steps // 10))
-        pt, js = train.train_and_save_guide(cfg, name=args.out)
+        pt, js = train.train_and_save_guide(with_steps(cfg), name=args.out)
     elif args.name == "evaluator":
         cfg = train.EvaluatorTraining(dataset=args.dataset, classifier_type=args.type, seed=args.seed)
         pt, js = train.train_and_save_evaluator(cfg, name=args.out)
@@ -70,7 +70,7 @@ def _train(args):
 def _sample(args):
     import numpy as np
 
-    from . import tasks
+    from . import guidance, tasks
     if args.task not in TASKS:
         raise ValueError(f"unknown task {args.task!r}; allowed: {', '.join(TASKS)}")
     denoiser = tasks.load_denoiser(args.checkpoint or f"denoiser_{args.dataset}")
@@ -85,11 +85,12 @@ def _sample(args):
         if args.label is None:
             raise ValueError("--task label needs --label (e.g. --label high_smile)")
         lr = tasks.ADAGRAD_LR if args.lr is None else args.lr
+        weight = guidance.GUIDANCE_WEIGHT if args.guidance_weight is None else args.guidance_weight
         landmarks = tasks.label_control(args.label, args.n, dataset=args.dataset, num_frames=args.length,
-                                        steps=args.steps, guidance_weight=args.guidance_weight, lr=lr,
+                                        steps=args.steps, guidance_weight=weight, lr=lr,
                                         seed=args.seed, denoiser=denoiser)
-        used.update(dataset=args.dataset, label=args.label, guidance_weight=args.guidance_weight, adagrad_lr=lr,
-                    adagrad_steps=3, classifier="guide_" + args.dataset + "_I")
+        used.update(dataset=args.dataset, label=args.label, guidance_weight=weight, adagrad_lr=lr,
+                    adagrad_steps=guidance.ADAGRAD_STEPS, classifier="guide_" + args.dataset + "_I")
         extra["labels"] = np.array([args.label] * args.n)
     np.savez(args.out, landmarks=landmarks.astype(np.float32), config=json.dumps(used), **extra)
     print(f"wrote {args.out}: landmarks {landmarks.shape} float32 (mm); config {used}")
@@ -111,7 +112,7 @@ def main(argv=None):
     p.add_argument("name", help="what to train: " + ", ".join(TRAINABLE) + " (guide: the noisy classifier "
                    "of Alg. 1; evaluator: the independent LSTM classifier of §5; motion3dgan, actor: the baselines of Table 1)")
     p.add_argument("--dataset", default="coma", choices=list(config.DATASETS))
-    p.add_argument("--type", default="I", choices=["I", "S"], help="classifier type (guide, evaluator): "
+    p.add_argument("--type", default="I", choices=list(data.CLASSIFIER_TYPES), help="classifier type (guide, evaluator): "
                    "I = label, S = label x N2E/E2N")
     p.add_argument("--variable-length", action="store_true", help="train on lengths 35-45 (paper App. A)")
     p.add_argument("--steps", type=int, default=None, help="training steps (default: the shipped recipe)")
@@ -124,7 +125,7 @@ def main(argv=None):
     p.add_argument("--task", default="unconditional", help="unconditional or label (Alg. 1)")
     p.add_argument("--dataset", default="coma", choices=list(config.DATASETS))
     p.add_argument("--label", default=None, help="expression label for --task label (e.g. high_smile)")
-    p.add_argument("--guidance-weight", type=float, default=0.01, help="lambda of Alg. 1 (paper: 0.01)")
+    p.add_argument("--guidance-weight", type=float, default=None, help="lambda of Alg. 1 (default: the paper's 0.01)")
     p.add_argument("--lr", type=float, default=None, help="Adagrad learning rate of Alg. 1 (default: the book's choice)")
     p.add_argument("--n", type=int, default=16, help="number of sequences")
     p.add_argument("--length", type=int, default=40, help="frames per sequence")

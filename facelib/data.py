@@ -270,12 +270,15 @@ class FaceDataset:
         """The 68 neutral landmarks (68, 3) in mm of a subject (noise-free)."""
         return self.face(subject).landmarks(np.zeros(aus.NUM_AUS)).astype(np.float32)
 
+    def sequence_neutrals(self):
+        """The neutral landmarks (n, 68, 3) in mm of the subject of every sequence."""
+        neutral = {s: self.neutral_landmarks(int(s)) for s in np.unique(self.subjects)}
+        return np.stack([neutral[s] for s in self.subjects])
+
     def delta_landmarks(self):
         """Delta L_f = L_f - L (paper §3.3): every sequence minus its subject's neutral landmarks, (n, F, 68, 3)."""
-        neutral = {s: self.neutral_landmarks(int(s)) for s in np.unique(self.subjects)}
-        own = np.stack([neutral[s] for s in self.subjects])
         valid = (np.arange(self.landmarks.shape[1])[None, :] < self.lengths[:, None])[..., None, None]
-        return ((self.landmarks - own[:, None]) * valid).astype(np.float32)
+        return ((self.landmarks - self.sequence_neutrals()[:, None]) * valid).astype(np.float32)
 
     def subject_neutrals(self):
         """Neutral landmarks (K, 68, 3) of the K subjects of this split (sorted by subject id)."""

@@ -89,7 +89,7 @@ def train_denoiser(cfg=DenoiserTraining(), progress=True, log_every=50):
     x_all = torch.as_tensor(normalizer.normalize(train.landmarks))
     mask_all = torch.arange(x_all.shape[1])[None, :] < torch.as_tensor(train.lengths)[:, None]
     x_all = x_all * mask_all[:, :, None, None]
-    own = torch.as_tensor(np.stack([train.neutral_landmarks(int(s)) for s in train.subjects])) / normalizer.scale
+    own = torch.as_tensor(train.sequence_neutrals()) / normalizer.scale
     pool = torch.as_tensor(training_anatomies(cfg.anatomy_pool) if cfg.anatomy_swap > 0 else np.zeros((1, 68, 3))) / normalizer.scale
     pool = pool.float()
     variable = not isinstance(cfg.num_frames, int)
