@@ -34,8 +34,8 @@ def _data(args):
     return status
 
 
-TRAINABLE = ("denoiser", "guide", "evaluator", "motion3dgan", "actor")
-TASKS = ("unconditional", "label")
+TRAINABLE = ("denoiser", "guide", "evaluator", "motion3dgan", "actor", "lstm_filler")
+TASKS = ("unconditional", "label", "fill", "geometry")
 
 
 def _train(args):
@@ -60,6 +60,9 @@ def _train(args):
     elif args.name == "evaluator":
         cfg = train.EvaluatorTraining(dataset=args.dataset, classifier_type=args.type, seed=args.seed)
         pt, js = train.train_and_save_evaluator(cfg, name=args.out)
+    elif args.name == "lstm_filler":
+        from . import baselines
+        pt, js = baselines.train_and_save_filler(args.dataset, args.steps, args.seed, args.out)
     else:
         from . import baselines
         pt, js = baselines.train_and_save_baseline(args.name, args.dataset, args.steps, args.seed, args.out)
@@ -67,12 +70,28 @@ def _train(args):
     return 0
 
 
+def _read_npz_array(path, keys, what):
+    """The first of ``keys`` found in an .npz (a clear error naming the file and the keys otherwise)."""
+    import numpy as np
+    try:
+        with np.load(path) as f:
+            for key in keys:
+                if key in f:
+                    return np.asarray(f[key], dtype=np.float64)
+            found = list(f.keys())
+    except (OSError, ValueError) as e:
+        raise ValueError(f"cannot read {what} from {path}: {e}") from None
+    raise ValueError(f"{path} has no {' or '.join(repr(k) for k in keys)} array ({what}); it has {found}")
+
+
 def _sample(args):
     import numpy as np
 
-    from . import guidance, tasks
+    from . import guidance, inpainting, tasks
     if args.task not in TASKS:
         raise ValueError(f"unknown task {args.task!r}; allowed: {', '.join(TASKS)}")
+    if args.task in ("label", "geometry") and args.label is None:
+        raise ValueError(f"--task {args.task} needs --label (e.g. --label high_smile)")
     denoiser = tasks.load_denoiser(args.checkpoint or f"denoiser_{args.dataset}")
     used = {"task": args.task, "n": args.n, "length": args.length, "seed": args.seed,
             "steps": args.steps or denoiser.diffusion.num_steps, "checkpoint": args.checkpoint or f"denoiser_{args.dataset}",
@@ -81,9 +100,30 @@ def _sample(args):
     if args.task == "unconditional":
         landmarks = tasks.unconditional(args.n, num_frames=args.length, seed=args.seed, steps=args.steps,
                                         denoiser=denoiser)
+    elif args.task == "fill":
+        if args.input is None or args.known is None:
+            raise ValueError("--task fill needs --input seq.npz (key 'landmarks') and --known ranges, e.g. 0:10,30:40")
+        given = _read_npz_array(args.input, ["landmarks"], "the sequence to fill")
+        if given.ndim not in (3, 4) or given.shape[-2:] != (68, 3):
+            raise ValueError(f"{args.input}: 'landmarks' must be (F, 68, 3) or (n, F, 68, 3) in mm, got {given.shape}")
+        known = inpainting.parse_known(args.known, given.shape[-3])
+        landmarks = tasks.fill(given, known, steps=args.steps, seed=args.seed, denoiser=denoiser)
+        used.update(input=args.input, known=args.known, length=int(given.shape[-3]), n=len(landmarks))
+        extra["known"] = known
+    elif args.task == "geometry":
+        if args.neutral is None:
+            raise ValueError("--task geometry needs --neutral neutral.npz (key 'neutral' or 'landmarks', (68, 3) mm)")
+        neutral = _read_npz_array(args.neutral, ["neutral", "landmarks"], "the neutral landmarks")
+        lr = tasks.ADAGRAD_LR if args.lr is None else args.lr
+        weight = guidance.GUIDANCE_WEIGHT if args.guidance_weight is None else args.guidance_weight
+        label = tasks.order_sensitive_label(args.label, args.order)
+        landmarks = tasks.geometry_adaptive(neutral, label, n=args.n, num_frames=args.length, passes=args.passes,
+                                            steps=args.steps, guidance_weight=weight, lr=lr, seed=args.seed,
+                                            dataset=args.dataset, denoiser=denoiser)
+        used.update(dataset=args.dataset, label=label, neutral=args.neutral, passes=args.passes,
+                    guidance_weight=weight, adagrad_lr=lr, classifier="guide_" + args.dataset + "_S")
+        extra["labels"] = np.array([label] * args.n)
     else:
-        if args.label is None:
-            raise ValueError("--task label needs --label (e.g. --label high_smile)")
         lr = tasks.ADAGRAD_LR if args.lr is None else args.lr
         weight = guidance.GUIDANCE_WEIGHT if args.guidance_weight is None else args.guidance_weight
         landmarks = tasks.label_control(args.label, args.n, dataset=args.dataset, num_frames=args.length,
@@ -122,11 +162,20 @@ def main(argv=None):
     p.set_defaults(func=_train)
 
     p = sub.add_parser("sample", help="generate landmark sequences and write them to an .npz")
-    p.add_argument("--task", default="unconditional", help="unconditional or label (Alg. 1)")
+    p.add_argument("--task", default="unconditional", help="unconditional, label (Alg. 1), fill (Alg. 3) "
+                   "or geometry (Alg. 4)")
     p.add_argument("--dataset", default="coma", choices=list(config.DATASETS))
-    p.add_argument("--label", default=None, help="expression label for --task label (e.g. high_smile)")
+    p.add_argument("--label", default=None, help="expression label for --task label or geometry (e.g. high_smile)")
     p.add_argument("--guidance-weight", type=float, default=None, help="lambda of Alg. 1 (default: the paper's 0.01)")
     p.add_argument("--lr", type=float, default=None, help="Adagrad learning rate of Alg. 1 (default: the book's choice)")
+    p.add_argument("--order", default=None, choices=["N2E", "E2N"], help="--task geometry: neutral face first "
+                   "(N2E, the default) or last (E2N)")
+    p.add_argument("--passes", type=int, default=5, help="--task geometry: harmonising passes of Alg. 4 (default 5)")
+    p.add_argument("--input", default=None, help="--task fill: .npz whose 'landmarks' (F, 68, 3) or (n, F, 68, 3) "
+                   "holds the sequence(s) to complete")
+    p.add_argument("--known", default=None, help="--task fill: known frames as 0-based ranges, e.g. 0:10,30:40")
+    p.add_argument("--neutral", default=None, help="--task geometry: .npz with the neutral landmarks (68, 3) in mm "
+                   "(key 'neutral' or 'landmarks')")
     p.add_argument("--n", type=int, default=16, help="number of sequences")
     p.add_argument("--length", type=int, default=40, help="frames per sequence")
     p.add_argument("--steps", type=int, default=None, help="reverse steps (default: all T = 2000; fewer = respaced)")

@@ -15,7 +15,7 @@ import torch
 
 from . import data
 from .checkpoints import load_checkpoint, save_checkpoint
-from .models import actor, motion3dgan
+from .models import actor, lstm_filler, motion3dgan
 
 BASELINES = {
     "motion3dgan": (motion3dgan, motion3dgan.Motion3DGANTraining, motion3dgan.train_motion3dgan),
@@ -63,3 +63,36 @@ def generate(model, labels, seed=0):
     if bad or not labels:
         raise ValueError(f"unknown label {bad[0] if bad else None!r}; allowed: {', '.join(model.label_names)}")
     return model.generate(np.array([model.label_names.index(y) for y in labels]), seed=seed)
+
+
+# ------------------------------------------------------------------ the learned filling baseline (Table 3)
+def train_and_save_filler(dataset="coma", steps=None, seed=0, out=None, progress=True):
+    """Train the bidirectional-LSTM filler (Berson et al.) and save it as lstm_filler_<dataset>."""
+    data.check_dataset_name(dataset)
+    cfg = lstm_filler.LSTMFillerTraining(dataset=dataset, seed=seed)
+    if steps:
+        cfg = replace(cfg, steps=steps)
+    model, history = lstm_filler.train_lstm_filler(cfg, progress=progress)
+    return save_checkpoint(out or f"lstm_filler_{dataset}", model, "lstm_filler", asdict(model.config),
+                           training=asdict(cfg), normalizer=model.normalizer.to_dict(), history=history,
+                           torch_version=torch.__version__)
+
+
+def load_filler(dataset="coma", checkpoint=None):
+    """Load the shipped LSTM filler of a dataset (sha256 checked)."""
+    data.check_dataset_name(dataset)
+    model, meta = load_checkpoint(checkpoint or f"lstm_filler_{dataset}", "lstm_filler",
+                                  lambda c: lstm_filler.LSTMFiller(lstm_filler.LSTMFillerConfig(**c)))
+    model.normalizer, model.meta = data.LandmarkNormalizer.from_dict(meta["normalizer"]), meta
+    return model.eval()
+
+
+@torch.no_grad()
+def lstm_fill(sequences, known, filler=None, dataset="coma", seed=0):
+    """Fill the unknown frames with the LSTM filler; (n, F, 68, 3) float32 mm, known frames kept exactly."""
+    from .inpainting import _check_fill_input
+    x, mask = _check_fill_input(sequences, known)
+    filler = filler or load_filler(dataset)
+    xn = torch.as_tensor(filler.normalizer.normalize(np.where(mask[..., None, None], x, 0.0)))
+    out = filler.normalizer.denormalize(filler(xn, torch.as_tensor(mask), generator=torch.Generator().manual_seed(seed)))
+    return np.where(mask[..., None, None], x, out.numpy()).astype(np.float32)

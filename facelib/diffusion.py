@@ -148,19 +148,32 @@ class GaussianDiffusion:
             x = x * mask[:, :, None, None]
         return x, out
 
-    def sample(self, model, shape, seed=0, x_T=None, mask=None, guide=None, callback=None, progress=True):
+    def sample(self, model, shape, seed=0, x_T=None, mask=None, guide=None, callback=None, progress=True,
+               start_step=None, resample=1):
         """Run the reverse chain from x_T ~ N(0, I) down to x_0 and return x_0.
 
         shape: (batch, frames, 68, 3).  callback(t, x_{t-1}, out) is called after every step
         (for animations and the downstream tasks).  Deterministic for a given seed.
+        start_step: begin at a step k < T instead, with ``x_T`` holding x_k (SDEdit-style re-noising).
+        resample: RePaint's resampling (Lugmayr et al. 2022, jump length 1): every step t > 1 is run
+        ``resample`` times, x_{t-1} being re-noised back to x_t ~ q(x_t | x_{t-1}) (Eq. 2) in between,
+        so that conditioned parts (the known frames of Alg. 3) and generated parts can harmonise.
         """
+        if isinstance(resample, bool) or not isinstance(resample, (int, np.integer)) or resample < 1:
+            raise ValueError(f"resample must be a positive integer, got {resample!r}")
+        start_step = self.num_steps if start_step is None else start_step
+        if not 1 <= start_step <= self.num_steps:
+            raise ValueError(f"start_step must be in 1..{self.num_steps}, got {start_step}")
         generator = torch.Generator().manual_seed(seed)
         device = next(model.parameters()).device if hasattr(model, "parameters") else torch.device("cpu")
         x = torch.randn(shape, generator=generator).to(device) if x_T is None else x_T.to(device)
         if mask is not None:
             x = x * mask[:, :, None, None]
-        for t in tqdm(range(self.num_steps, 0, -1), desc="sampling", disable=not progress, leave=False):
-            x, out = self.p_sample(model, x, t, generator, mask, guide)
+        for t in tqdm(range(start_step, 0, -1), desc="sampling", disable=not progress, leave=False):
+            for r in range(resample if t > 1 else 1):
+                if r > 0:
+                    x = self.q_step(x, t, generator)
+                x, out = self.p_sample(model, x, t, generator, mask, guide)
             if callback is not None:
                 callback(t, x, out)
         return x

@@ -10,6 +10,10 @@ The model is never changed: guidance is a function ``guide(x_hat, xt, t, out)`` 
   for label control (Alg. 1) and cos(BiT(x, t-1), E(c)) for text control (Alg. 2, Eq. 10).
   With sigma_t^2 the variance of p_theta, lambda log p_theta(x | x_t) = -lambda ||x - mu||^2 /
   (2 sigma_t^2) + const: a spring that holds x near the model's mean, stiffer at small t.
+* :class:`ReconstructionGuidance` (not in the paper; Ho et al. 2022, "video diffusion models", with
+  the normalised step of Chung et al. 2023, DPS): pull x_{t-1} along -grad_{x_t} ||x_0_hat(x_t)|S_K -
+  x_0|S_K||, so that the *unknown* frames agree with known ones (the remedy of chapter 08 for
+  Alg. 4's disharmony).
 * :class:`MeanShiftGuidance`, the classic classifier guidance (Sohl-Dickstein et al.; Dhariwal
   & Nichol 2021, Alg. 1): x_{t-1} ~ N(mu + s sigma_t^2 grad_{x_t} log p_phi(y | x_t, t), sigma_t^2 I).
   Paper §3.2 writes the shift with grad p_phi; the correct form has grad log p_phi.
@@ -93,3 +97,43 @@ class MeanShiftGuidance:
             x = xt.detach().clone().requires_grad_(True)
             grad = torch.autograd.grad(self.score(x, self.diffusion.model_time(t, len(x)).to(x.device)).sum(), x)[0]
         return x_hat + self.scale * out["variance"] * grad
+
+
+@dataclass
+class ReconstructionGuidance:
+    """x_{t-1} = x_hat_{t-1} - scale * grad_{x_t} ||x0_hat(x_t)|S_K - x_0|S_K||  (per sequence).
+
+    x0_hat(x_t) = (x_t - sqrt(1 - abar_t) eps_theta(x_t, t)) / sqrt(abar_t) is the model's estimate of
+    the clean sequence (Eq. 6 inverted); its known frames should equal the given ones.  Replacing
+    the known frames (Alg. 3) tells the model nothing about how the unknown frames must change to
+    fit them; this gradient does, through the denoiser.  The norm (not its square) makes the step
+    size independent of how far off the estimate is (DPS).  Costs one backward pass per step.
+    """
+
+    model: torch.nn.Module
+    diffusion: GaussianDiffusion
+    x0: torch.Tensor  # (B, F, 68, 3), normalised; only the known frames are read
+    known: torch.Tensor  # (B, F) bool
+    scale: float = 1.0
+
+    def __post_init__(self):
+        _check_positive("the reconstruction guidance scale", self.scale, allow_zero=True)
+
+    def __call__(self, x_hat, xt, t, out):
+        with torch.enable_grad():
+            x = xt.detach().clone().requires_grad_(True)
+            eps = self.model(x, self.diffusion.model_time(t, len(x)).to(x.device))
+            error = ((self.diffusion.predict_x0(x, t, eps) - self.x0) ** 2).sum((2, 3)) * self.known
+            grad = torch.autograd.grad(error.sum(1).sqrt().sum(), x)[0]
+        return x_hat - self.scale * grad
+
+
+def chain(*guides):
+    """One sampler hook that applies several guidance hooks in turn (None entries are skipped)."""
+    guides = [g for g in guides if g is not None]
+
+    def guide(x_hat, xt, t, out):
+        for g in guides:
+            x_hat = g(x_hat, xt, t, out)
+        return x_hat
+    return guide

@@ -1,4 +1,5 @@
-"""Evaluation metrics (paper §5): classification accuracy and the confusion matrix."""
+"""Evaluation metrics (paper §5): accuracy, confusion matrix, FID, diversity, the realism checks of
+chapter 03 and the filling metrics of chapters 07-08 (error on missing frames, seam smoothness)."""
 from __future__ import annotations
 
 import numpy as np
@@ -119,3 +120,41 @@ def multimodality(features, labels, num_pairs=20, seed=0):
     if not per_label:
         raise ValueError("multimodality needs at least 2 sequences for some label")
     return float(np.mean(per_label))
+
+
+def missing_frame_error(filled, truth, known):
+    """Mean per-landmark Euclidean error (mm) over the unknown frames (known: (n, F) or (F,) bool)."""
+    a, b = np.asarray(filled, dtype=np.float64), np.asarray(truth, dtype=np.float64)
+    if a.shape != b.shape:
+        raise ValueError(f"filled {a.shape} and true {b.shape} sequences must have the same shape")
+    unknown = ~np.broadcast_to(np.asarray(known, dtype=bool), a.shape[:2])
+    return float(np.linalg.norm(a - b, axis=-1)[unknown].mean())
+
+
+def frame_speeds(sequences):
+    """Frame-to-frame motion (mm/frame): the mean over landmarks of ||x_{f+1} - x_f||, shape (n, F - 1)."""
+    x = np.asarray(sequences, dtype=np.float64)
+    return np.linalg.norm(x[:, 1:] - x[:, :-1], axis=-1).mean(-1)
+
+
+def frame_accelerations(sequences):
+    """Velocity change (mm/frame^2) at every interior frame: the mean over landmarks of
+    ||x_{f+1} - 2 x_f + x_{f-1}||, shape (n, F - 2) for frames 1..F-2."""
+    x = np.asarray(sequences, dtype=np.float64)
+    return np.linalg.norm(x[:, 2:] - 2 * x[:, 1:-1] + x[:, :-2], axis=-1).mean(-1)
+
+
+def seam_jumps(sequences, known):
+    """The velocity jump at every known/unknown seam: :func:`frame_accelerations` at the unknown
+    frame next to the seam (it compares the step across the seam with the next generated step).
+    Compare with the same quantity on real sequences (``frame_accelerations(real)``).
+    Returns a flat array, one value per seam (seams whose unknown frame ends the sequence are skipped)."""
+    x = np.asarray(sequences, dtype=np.float64)
+    k = np.broadcast_to(np.asarray(known, dtype=bool), x.shape[:2])
+    acc = frame_accelerations(x)
+    jumps = []
+    for i, f in zip(*np.nonzero(k[:, 1:] != k[:, :-1])):  # a seam between frames f and f + 1
+        u = f + 1 if k[i, f] else f  # the unknown frame of the pair
+        if 1 <= u <= x.shape[1] - 2:
+            jumps.append(acc[i, u - 1])
+    return np.asarray(jumps)

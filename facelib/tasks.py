@@ -1,14 +1,15 @@
 """The paper's sampling tasks as functions (§3.2, App. C), all on one unconditional DDPM.
 
-So far: loading the trained denoiser, unconditional generation (§3.1) and label control
-(§3.2, Alg. 1).  Text control, filling and geometry-adaptive generation (Alg. 2-4) build on the
-same pieces: the denoiser is never retrained, only its reverse process is guided.
+Loading the trained denoiser, unconditional generation (§3.1), label control (§3.2, Alg. 1),
+expression filling (Alg. 3) and geometry-adaptive generation (Alg. 4).  Every task uses the same
+unconditional denoiser: it is never retrained, only its reverse process is guided.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import numpy as np
+import torch
 
 from . import data
 from .checkpoints import load_checkpoint
@@ -16,13 +17,16 @@ from .data import LandmarkNormalizer
 from .diffusion import GaussianDiffusion, named_betas
 from .evaluation import check_class_names
 from .face.sequences import check_num_frames
-from .guidance import GUIDANCE_WEIGHT, MeanShiftGuidance, OptimisationGuidance, classifier_score
+from .inpainting import KnownFrames, _check_fill_input
+from .guidance import (GUIDANCE_WEIGHT, MeanShiftGuidance, OptimisationGuidance, ReconstructionGuidance,
+                       chain, classifier_score)
 from .models.denoiser import Denoiser, DenoiserConfig
 from .models.noisy_classifier import NoisyClassifier, NoisyClassifierConfig
 
 DEFAULT_DENOISER = "denoiser_coma"
 ADAGRAD_LR = 0.01  # Alg. 1's Adagrad learning rate: not in the paper; chosen by the sweep of chapter 05
 GUIDANCE_METHODS = ("adagrad", "mean_shift")
+HARMONISING_PASSES = 5  # Alg. 4 line 1: "for i = 1 to 5"
 
 
 @dataclass
@@ -136,3 +140,114 @@ def unconditional(n, num_frames=40, seed=0, steps=None, denoiser=None, progress=
     diffusion = denoiser.diffusion_with(steps)
     x = diffusion.sample(denoiser.model, (n, num_frames, 68, 3), seed=seed, progress=progress, callback=callback)
     return denoiser.normalizer.denormalize(x.detach()).numpy()
+
+
+def _known_noise(seed):
+    """The generator of the known frames' noise: its own stream, so adding known frames never
+    changes the noise that drives the unknown ones."""
+    return torch.Generator().manual_seed(10_000 + seed)
+
+
+def fill(sequences, known, steps=None, resample=1, seed=0, denoiser=None, dataset="coma", progress=True,
+         callback=None):
+    """Expression filling (Alg. 3): complete the unknown frames of landmark sequences.
+
+    sequences: (F, 68, 3) or (n, F, 68, 3) in mm; only the known frames are read (the others may
+    hold anything, NaN included).  known: (F,) or (n, F) bool, True = known frame.
+    resample: 1 for Alg. 3 as written; r > 1 adds RePaint's resampling (each step run r times).
+    Returns (n, F, 68, 3) float32 in mm whose known frames equal the given ones exactly.
+    """
+    x, mask = _check_fill_input(sequences, known)
+    denoiser = denoiser or load_denoiser(f"denoiser_{dataset}")
+    diffusion = denoiser.diffusion_with(steps)
+    x0 = torch.as_tensor(denoiser.normalizer.normalize(np.where(mask[..., None, None], x, 0.0)))
+    hook = KnownFrames(diffusion, x0, torch.as_tensor(mask), _known_noise(seed))
+    out = diffusion.sample(denoiser.model, x0.shape, seed=seed, x_T=hook.start(torch.Generator().manual_seed(seed)),
+                           guide=hook, progress=progress, callback=callback, resample=resample)
+    return _keep_known(denoiser.normalizer.denormalize(out.detach()).numpy(), x, mask)
+
+
+def _keep_known(generated_mm, given_mm, mask):
+    """The known frames, exactly as given (the sampler returns them through normalise/denormalise,
+    which is exact only to float rounding, ~1e-6 mm)."""
+    return np.where(mask[..., None, None], given_mm, generated_mm).astype(np.float32)
+
+
+def order_sensitive_label(label, order=None):
+    """("mouth_open", "N2E") or "mouth_open N2E" -> the type-S class name "mouth_open N2E"."""
+    if not isinstance(label, str):
+        raise ValueError(f"label must be a label name, got {label!r}")
+    parts = label.split()
+    if len(parts) == 2:
+        if order is not None and order != parts[1]:
+            raise ValueError(f"label {label!r} already names the order, which differs from order={order!r}")
+        label, order = parts
+    order = order or "N2E"
+    if order not in data.KIND_NAMES:
+        raise ValueError(f"order must be one of {data.KIND_NAMES}, got {order!r}")
+    return f"{label} {order}"
+
+
+def geometry_adaptive(neutral_landmarks, label, order=None, n=1, num_frames=40, passes=HARMONISING_PASSES,
+                      steps=None, renoise_step=None, resample=1, reconstruction_scale=0.0,
+                      guidance_weight=GUIDANCE_WEIGHT, lr=ADAGRAD_LR, seed=0, dataset="coma", denoiser=None, guide=None, return_passes=False, progress=True):
+    """Geometry-adaptive generation with label control (Alg. 4): n sequences of a given face.
+
+    neutral_landmarks: (68, 3) (or (n, 68, 3)) neutral landmarks in mm of the face to animate.
+    label: an expression label ("mouth_open") with order "N2E" (default; the neutral face is frame 1,
+    S_K = {1}) or "E2N" (it is frame F); or a type-S class name such as "mouth_open E2N"; or a list
+    of n such labels (one per sequence).
+    passes: the harmonising passes of Alg. 4; pass i > 1 re-noises the previous result to step
+    ``renoise_step`` with Eq. 3 (None: to T, as the paper).  Guided by the type-S guidance
+    classifier through Alg. 1's Adagrad steps.  resample: RePaint's resampling within each pass
+    (1 = Alg. 4 as written).  reconstruction_scale > 0 adds reconstruction guidance
+    (:class:`~facelib.guidance.ReconstructionGuidance`; not in the paper, chapter 08) after the label
+    guidance: it makes the generated frames join the given neutral face.
+    Returns (n, F, 68, 3) float32 in mm, or with ``return_passes`` (passes, n, F, 68, 3).
+    """
+    _check_n(n)
+    num_frames = check_num_frames(num_frames)
+    if isinstance(passes, bool) or not isinstance(passes, (int, np.integer)) or passes < 1:
+        raise ValueError(f"passes must be a positive integer, got {passes!r}")
+    neutral = np.asarray(neutral_landmarks, dtype=np.float64)
+    if neutral.shape == (68, 3):
+        neutral = np.broadcast_to(neutral, (n, 68, 3))
+    if neutral.shape != (n, 68, 3):
+        raise ValueError(f"neutral landmarks must have shape (68, 3) or (n={n}, 68, 3), got {np.shape(neutral_landmarks)}")
+    if not np.isfinite(neutral).all():
+        raise ValueError("the neutral landmarks contain NaN or infinite values")
+    names = [order_sensitive_label(y, order) for y in ([label] * n if isinstance(label, str) else list(label))]
+    if len(names) != n:
+        raise ValueError(f"label must be a label name or a list of n={n} label names, got {len(names)} labels")
+    guide = guide or load_guide(dataset, "S")
+    if guide.classifier_type != "S":
+        raise ValueError("geometry-adaptive generation needs a type-S guidance classifier (label x N2E/E2N)")
+    targets = guide.class_indices(names)
+    denoiser = denoiser or load_denoiser(f"denoiser_{guide.dataset}")
+    check_same_space(denoiser, guide)
+    diffusion = denoiser.diffusion_with(steps)
+    restart = diffusion.num_steps if renoise_step is None else int(renoise_step)
+    if not 1 <= restart <= diffusion.num_steps:
+        raise ValueError(f"renoise_step must be in 1..{diffusion.num_steps} (steps of the sampler), got {renoise_step}")
+
+    mask = np.zeros((n, num_frames), dtype=bool)
+    mask[np.arange(n), [0 if y.endswith("N2E") else -1 for y in names]] = True  # S_K = {1} for N2E, {F} for E2N (§5.4)
+    given = np.zeros((n, num_frames, 68, 3))
+    given[mask] = neutral
+    x0 = torch.as_tensor(denoiser.normalizer.normalize(given))
+    guidance = OptimisationGuidance(classifier_score(guide.model, targets), diffusion, guidance_weight, lr)
+    if reconstruction_scale:
+        guidance = chain(guidance, ReconstructionGuidance(denoiser.model, diffusion, x0, torch.as_tensor(mask),
+                                                          reconstruction_scale))
+    hook = KnownFrames(diffusion, x0, torch.as_tensor(mask), _known_noise(seed), inner=guidance)
+    results, x = [], None
+    for i in range(passes):
+        gen = torch.Generator().manual_seed(seed + 7919 * i)
+        if x is None:  # Alg. 4 lines 3-4
+            start, first = hook.start(gen), diffusion.num_steps
+        else:  # Alg. 4 line 6: x_k = sqrt(abar_k) x_0 + sqrt(1 - abar_k) eps on every frame
+            start, first = diffusion.q_sample(x, torch.full((n,), restart), generator=gen), restart
+        x = diffusion.sample(denoiser.model, x0.shape, seed=seed + 7919 * i, x_T=start, guide=hook,
+                             progress=progress, start_step=first, resample=resample).detach()
+        results.append(_keep_known(denoiser.normalizer.denormalize(x).numpy(), given, mask))
+    return np.stack(results) if return_passes else results[-1]

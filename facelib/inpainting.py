@@ -1,0 +1,154 @@
+"""Conditioning the reverse process on known frames (paper §3.2, App. C Alg. 3 and 4).
+
+Expression filling is inpainting in time: the frames S_K of x_0 are known, the frames S_U are
+not.  Because q(x_t | x_0) is isotropic (Eq. 3), the known frames can be noised to *any* step on
+their own, so the sampler is left as it is and, after every reverse step, the known frames of
+x_{t-1} are overwritten by a fresh draw from q(x_{t-1} | x_0):
+
+    x_{t-1}|S_U = x_hat_{t-1}|S_U,     x_{t-1}|S_K = sqrt(abar_{t-1}) x_0|S_K + sqrt(1 - abar_{t-1}) eps
+
+(Alg. 3 lines 10-12; the paper prints alpha where abar is meant, see the errata).  Two traps of
+public RePaint implementations are pinned by tests: the noise level is that of step t-1, not t,
+and sqrt(1 - abar) is a standard deviation, not a variance.
+
+Also here: the known/unknown masks (parsing "0:10,30:40", validation, the FFB / FFE / FFM
+settings of §5.3) and the two non-learned filling baselines (mean imputation, interpolation).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable, Optional
+
+import numpy as np
+import torch
+
+from .diffusion import GaussianDiffusion
+
+FILL_SETTINGS = ("FFB", "FFE", "FFM")  # §5.3: filling from the beginning, the end, the middle
+
+
+def check_known_mask(mask, num_frames=None):
+    """Validate a known-frame mask (F,) or (B, F) of booleans (True = known); returns a bool array.
+
+    At least one frame must be known and at least one unknown in every sequence."""
+    m = np.asarray(mask)
+    if m.dtype != bool:
+        if not np.isin(m, (0, 1)).all():
+            raise ValueError("the known-frame mask must be boolean (True = known frame) or 0/1")
+        m = m.astype(bool)
+    if m.ndim not in (1, 2) or m.shape[-1] == 0:
+        raise ValueError(f"the known-frame mask must have shape (frames,) or (batch, frames), got {m.shape}")
+    if num_frames is not None and m.shape[-1] != num_frames:
+        raise ValueError(f"the known-frame mask has {m.shape[-1]} frames but the sequence has {num_frames}")
+    rows = m.reshape(-1, m.shape[-1])
+    if not rows.any(axis=1).all():
+        raise ValueError("the known-frame mask has no known frame: give at least one frame to fill from")
+    if rows.all(axis=1).any():
+        raise ValueError("the known-frame mask has no unknown frame: there is nothing to fill")
+    return m
+
+
+def parse_known(spec, num_frames):
+    """Parse frame ranges like "0:10,30:40" (Python slices, 0-based, end excluded) into a mask (F,)."""
+    if not isinstance(spec, str) or not spec.strip():
+        raise ValueError(f"known frames must be ranges like '0:10,30:40', got {spec!r}")
+    mask = np.zeros(num_frames, dtype=bool)
+    for part in spec.split(","):
+        try:
+            start, stop = (int(v) for v in part.split(":")) if ":" in part else (int(part), int(part) + 1)
+        except ValueError:
+            raise ValueError(f"cannot read the frame range {part.strip()!r}; write start:stop, e.g. '0:10,30:40'") from None
+        if not 0 <= start < stop <= num_frames:
+            raise ValueError(f"frame range {part.strip()!r} is outside 0:{num_frames} (start < stop required)")
+        mask[start:stop] = True
+    return check_known_mask(mask)
+
+
+def fill_masks(setting, n, num_frames=40, seed=0):
+    """Known-frame masks (n, F) of the §5.3 experiments, with a random length per sequence:
+    FFB (filling from the beginning: the last l frames known, l ~ U{10..30}), FFE (the first l
+    known), FFM (l ~ U{5..15} known at each end, the middle missing)."""
+    if setting not in FILL_SETTINGS:
+        raise ValueError(f"unknown filling setting {setting!r}; allowed: {', '.join(FILL_SETTINGS)}")
+    rng = np.random.default_rng(seed)
+    low, high = (5, 15) if setting == "FFM" else (10, 30)
+    lengths = rng.integers(low, high + 1, size=n)
+    f = np.arange(num_frames)[None, :]
+    l = lengths[:, None]
+    mask = {"FFB": f >= num_frames - l, "FFE": f < l, "FFM": (f < l) | (f >= num_frames - l)}[setting]
+    return check_known_mask(mask, num_frames)
+
+
+@dataclass
+class KnownFrames:
+    """Sampler hook of Alg. 3 (lines 10-12): keep x_hat on the unknown frames, re-draw the known
+    frames from q(x_{t-1} | x_0).  ``inner`` is applied first: the guidance of Alg. 4 line 12.
+
+    x0: (B, F, 68, 3) in the model's normalised space (values on unknown frames are ignored);
+    known: (B, F) bool.  Deterministic through ``generator``.
+    """
+
+    diffusion: GaussianDiffusion
+    x0: torch.Tensor
+    known: torch.Tensor
+    generator: torch.Generator
+    inner: Optional[Callable] = None
+
+    def noised(self, t):
+        """x_t ~ q(x_t | x_0) on every frame (Eq. 3, with the correct sqrt(abar_t)); x_0 itself at t = 0."""
+        if t == 0:
+            return self.x0
+        return self.diffusion.q_sample(self.x0, torch.full((len(self.x0),), t), generator=self.generator)
+
+    def start(self, generator):
+        """x_T: N(0, I) on the unknown frames, q(x_T | x_0) on the known ones (Alg. 3 lines 1-2)."""
+        noise = torch.randn(self.x0.shape, generator=generator)
+        return self.merge(noise, self.noised(self.diffusion.num_steps))
+
+    def merge(self, unknown, known):
+        return torch.where(self.known[:, :, None, None], known, unknown)
+
+    def __call__(self, x_hat, xt, t, out):
+        if self.inner is not None:
+            x_hat = self.inner(x_hat, xt, t, out)
+        return self.merge(x_hat, self.noised(t - 1))
+
+
+def mean_imputation(sequences, known):
+    """Baseline: every missing frame is the mean of the sequence's known frames.
+
+    Our reading of the paper's undefined "mean imputation" (§5.3): the per-sequence mean over time,
+    the classic imputation of a missing value by the mean of the observed ones; it keeps the
+    subject's anatomy (a dataset mean would not) and carries no motion."""
+    x, m = _check_fill_input(sequences, known)
+    mean = np.where(m[..., None, None], x, 0.0).sum(1, keepdims=True) / m.sum(1)[:, None, None, None]
+    return np.where(m[..., None, None], x, mean).astype(np.float32)
+
+
+def linear_interpolation(sequences, known):
+    """Baseline: missing frames linearly interpolated between the nearest known frames; before the
+    first (after the last) known frame, that frame is held constant."""
+    x, m = _check_fill_input(sequences, known)
+    out = np.zeros_like(x)
+    frames = np.arange(x.shape[1])
+    for i in range(len(x)):
+        k = frames[m[i]]
+        flat = x[i, k].reshape(len(k), -1)
+        out[i] = np.stack([np.interp(frames, k, flat[:, j]) for j in range(flat.shape[1])], 1).reshape(x.shape[1:])
+    return out.astype(np.float32)
+
+
+def _check_fill_input(sequences, known):
+    """(x, mask) as (n, F, 68, 3) float64 and (n, F) bool; unknown frames may hold anything (even NaN)."""
+    x = np.asarray(sequences, dtype=np.float64)
+    if x.ndim == 3:
+        x = x[None]
+    if x.ndim != 4 or x.shape[2:] != (68, 3):
+        raise ValueError(f"expected landmark sequences (n, frames, 68, 3) or (frames, 68, 3), got {np.shape(sequences)}")
+    m = check_known_mask(known, x.shape[1])
+    m = np.broadcast_to(m, x.shape[:2]).copy() if m.ndim == 1 else m
+    if m.shape != x.shape[:2]:
+        raise ValueError(f"mask {m.shape} does not match {len(x)} sequences of {x.shape[1]} frames")
+    if not np.isfinite(x[m]).all():
+        raise ValueError("the known frames contain NaN or infinite values")
+    return x, m
