@@ -107,8 +107,10 @@ def _sample(args):
         if given.ndim not in (3, 4) or given.shape[-2:] != (68, 3):
             raise ValueError(f"{args.input}: 'landmarks' must be (F, 68, 3) or (n, F, 68, 3) in mm, got {given.shape}")
         known = inpainting.parse_known(args.known, given.shape[-3])
-        landmarks = tasks.fill(given, known, steps=args.steps, seed=args.seed, denoiser=denoiser)
-        used.update(input=args.input, known=args.known, length=int(given.shape[-3]), n=len(landmarks))
+        landmarks = tasks.fill(given, known, steps=args.steps, reconstruction_scale=args.reconstruction_scale,
+                               seed=args.seed, denoiser=denoiser)
+        used.update(input=args.input, known=args.known, length=int(given.shape[-3]), n=len(landmarks),
+                    reconstruction_scale=args.reconstruction_scale)
         extra["known"] = known
     elif args.task == "geometry":
         if args.neutral is None:
@@ -118,9 +120,11 @@ def _sample(args):
         weight = guidance.GUIDANCE_WEIGHT if args.guidance_weight is None else args.guidance_weight
         label = tasks.order_sensitive_label(args.label, args.order)
         landmarks = tasks.geometry_adaptive(neutral, label, n=args.n, num_frames=args.length, passes=args.passes,
-                                            steps=args.steps, guidance_weight=weight, lr=lr, seed=args.seed,
+                                            steps=args.steps, reconstruction_scale=args.reconstruction_scale,
+                                            guidance_weight=weight, lr=lr, seed=args.seed,
                                             dataset=args.dataset, denoiser=denoiser)
         used.update(dataset=args.dataset, label=label, neutral=args.neutral, passes=args.passes,
+                    reconstruction_scale=args.reconstruction_scale,
                     guidance_weight=weight, adagrad_lr=lr, classifier="guide_" + args.dataset + "_S")
         extra["labels"] = np.array([label] * args.n)
     else:
@@ -171,6 +175,9 @@ def main(argv=None):
     p.add_argument("--order", default=None, choices=["N2E", "E2N"], help="--task geometry: neutral face first "
                    "(N2E, the default) or last (E2N)")
     p.add_argument("--passes", type=int, default=5, help="--task geometry: harmonising passes of Alg. 4 (default 5)")
+    p.add_argument("--reconstruction-scale", type=float, default=0.0, help="--task fill or geometry: reconstruction "
+                   "guidance step (not in the paper; chapters 07-08 use facelib.tasks.RECONSTRUCTION_SCALE; default 0 = "
+                   "Alg. 3 / Alg. 4 as printed)")
     p.add_argument("--input", default=None, help="--task fill: .npz whose 'landmarks' (F, 68, 3) or (n, F, 68, 3) "
                    "holds the sequence(s) to complete")
     p.add_argument("--known", default=None, help="--task fill: known frames as 0-based ranges, e.g. 0:10,30:40")

@@ -27,6 +27,7 @@ DEFAULT_DENOISER = "denoiser_coma"
 ADAGRAD_LR = 0.01  # Alg. 1's Adagrad learning rate: not in the paper; chosen by the sweep of chapter 05
 GUIDANCE_METHODS = ("adagrad", "mean_shift")
 HARMONISING_PASSES = 5  # Alg. 4 line 1: "for i = 1 to 5"
+RECONSTRUCTION_SCALE = 2.0  # our choice for Alg. 4 + reconstruction guidance: the sweep of chapter 08
 
 
 @dataclass
@@ -148,20 +149,24 @@ def _known_noise(seed):
     return torch.Generator().manual_seed(10_000 + seed)
 
 
-def fill(sequences, known, steps=None, resample=1, seed=0, denoiser=None, dataset="coma", progress=True,
-         callback=None):
+def fill(sequences, known, steps=None, resample=1, reconstruction_scale=0.0, seed=0, denoiser=None, dataset="coma",
+         progress=True, callback=None):
     """Expression filling (Alg. 3): complete the unknown frames of landmark sequences.
 
     sequences: (F, 68, 3) or (n, F, 68, 3) in mm; only the known frames are read (the others may
     hold anything, NaN included).  known: (F,) or (n, F) bool, True = known frame.
     resample: 1 for Alg. 3 as written; r > 1 adds RePaint's resampling (each step run r times).
+    reconstruction_scale > 0 adds reconstruction guidance (not in the paper; chapters 07-08).
     Returns (n, F, 68, 3) float32 in mm whose known frames equal the given ones exactly.
     """
     x, mask = _check_fill_input(sequences, known)
     denoiser = denoiser or load_denoiser(f"denoiser_{dataset}")
     diffusion = denoiser.diffusion_with(steps)
     x0 = torch.as_tensor(denoiser.normalizer.normalize(np.where(mask[..., None, None], x, 0.0)))
-    hook = KnownFrames(diffusion, x0, torch.as_tensor(mask), _known_noise(seed))
+    mask_t = torch.as_tensor(mask)
+    reconstruction = (ReconstructionGuidance(denoiser.model, diffusion, x0, mask_t, reconstruction_scale)
+                      if reconstruction_scale else None)
+    hook = KnownFrames(diffusion, x0, mask_t, _known_noise(seed), inner=reconstruction)
     out = diffusion.sample(denoiser.model, x0.shape, seed=seed, x_T=hook.start(torch.Generator().manual_seed(seed)),
                            guide=hook, progress=progress, callback=callback, resample=resample)
     return _keep_known(denoiser.normalizer.denormalize(out.detach()).numpy(), x, mask)

@@ -99,20 +99,20 @@ def test_mean_imputation_and_interpolation():
         inpainting.mean_imputation(np.zeros((2, 10, 67, 3)), known)
 
 
-def test_seam_jump_measures_the_velocity_change_at_the_seam():
+def test_seam_step_is_the_motion_across_the_seam():
     f = np.arange(12, dtype=np.float64)
     x = np.zeros((1, 12, 68, 3))
-    x[0, :, :, 0] = f[:, None]  # constant velocity: no jump anywhere
+    x[0, :, :, 0] = f[:, None]  # every landmark moves 1 mm per frame
     known = np.zeros(12, bool)
     known[:4] = True
-    assert np.allclose(metrics.seam_jumps(x, known), 0.0)
+    assert np.allclose(metrics.seam_steps(x, known), 1.0)
+    assert np.allclose(metrics.frame_speeds(x), 1.0) and metrics.frame_speeds(x).shape == (1, 11)
     y = x.copy()
-    y[0, 4:, :, 0] += 2.0  # the generated part starts 2 mm off
-    assert np.allclose(metrics.seam_jumps(y, known), 2.0)
-    assert metrics.frame_accelerations(y).shape == (1, 10)
+    y[0, 4:, :, 0] += 2.0  # the generated part starts 2 mm off: one 3 mm step at the seam
+    assert np.allclose(metrics.seam_steps(y, known), 3.0)
     both = np.zeros(12, bool)
     both[[0, 1, 10, 11]] = True  # two seams
-    assert len(metrics.seam_jumps(x, both)) == 2
+    assert len(metrics.seam_steps(x, both)) == 2
     assert metrics.missing_frame_error(y, x, known) == pytest.approx(2.0)
 
 
@@ -199,3 +199,44 @@ def test_cli_fill_and_geometry(tmp_path, coma_test, capsys):
     with pytest.raises(SystemExit):
         main(["sample", "--task", "geometry", "--neutral", str(seq), "--label", "mouth_open", "--out", str(out)])
     assert "(68, 3)" in capsys.readouterr().err
+
+
+def test_reconstruction_guidance_pulls_the_estimate_towards_the_known_frame(denoiser, coma_test):
+    from facelib.guidance import ReconstructionGuidance, chain
+    diffusion = denoiser.diffusion_with(50)
+    x0 = torch.as_tensor(denoiser.normalizer.normalize(np.repeat(coma_test.subject_neutrals()[:2, None], 40, 1)))
+    known = torch.zeros(2, 40, dtype=torch.bool)
+    known[:, 0] = True
+    xt = diffusion.q_sample(torch.as_tensor(denoiser.normalizer.normalize(coma_test.landmarks[5:7])), torch.tensor([20, 20]),
+                            generator=torch.Generator().manual_seed(0))  # a sequence of other faces, noised
+
+    def known_error(x, t):
+        with torch.no_grad():
+            eps = denoiser.model(x, diffusion.model_time(t, 2))
+            return ((diffusion.predict_x0(x, t, eps) - x0)[:, 0] ** 2).sum((1, 2))
+
+    hook = ReconstructionGuidance(denoiser.model, diffusion, x0, known, scale=0.05)
+    moved = hook(xt, xt, 20, None)  # x_hat = x_t: the step alone
+    assert (known_error(moved, 20) < known_error(xt, 20)).all()
+    assert torch.equal(chain(None, hook)(xt, xt, 20, None), moved)
+    with pytest.raises(ValueError, match="non-negative"):
+        ReconstructionGuidance(denoiser.model, diffusion, x0, known, scale=-1.0)
+
+
+def test_resampling_is_checked_and_one_means_plain_alg_3(coma_test, denoiser):
+    x, known = coma_test.landmarks[:2], inpainting.fill_masks("FFE", 2, 40, seed=1)
+    plain = tasks.fill(x, known, steps=6, seed=0, denoiser=denoiser, progress=False)
+    assert np.array_equal(plain, tasks.fill(x, known, steps=6, resample=1, seed=0, denoiser=denoiser, progress=False))
+    assert not np.array_equal(plain, tasks.fill(x, known, steps=6, resample=2, seed=0, denoiser=denoiser, progress=False))
+    with pytest.raises(ValueError, match="resample must be a positive integer"):
+        tasks.fill(x, known, steps=6, resample=0, denoiser=denoiser)
+
+
+def test_geometry_adaptive_takes_one_label_per_sequence(coma_test, denoiser):
+    neutral = coma_test.subject_neutrals()[:2]
+    out = tasks.geometry_adaptive(neutral, ["mouth_open", "eyebrow E2N"], n=2, steps=5, passes=1, denoiser=denoiser,
+                                  progress=False)
+    assert np.array_equal(out[0, 0], neutral[0].astype(np.float32))  # N2E: first frame given
+    assert np.array_equal(out[1, -1], neutral[1].astype(np.float32))  # E2N: last frame given
+    with pytest.raises(ValueError, match="list of n=3"):
+        tasks.geometry_adaptive(neutral[0], ["mouth_open"] * 2, n=3, steps=5, denoiser=denoiser)
