@@ -10,6 +10,7 @@ import base64
 import inspect
 import io
 import os
+import warnings
 
 import numpy as np
 
@@ -53,7 +54,9 @@ class FaceRenderer:
     """
 
     def __init__(self, size=(320, 400), view="front", faces=None, zoom=1.0):
-        import pyvista as pv
+        with warnings.catch_warnings():  # pyvista imports pooch, whose tqdm.auto warns in notebooks without ipywidgets
+            warnings.filterwarnings("ignore", message="IProgress not found")
+            import pyvista as pv
         self._pv = pv
         self.size, self.view, self.zoom = size, view, zoom
         self.faces = tpl.get_template().faces if faces is None else np.asarray(faces)
