@@ -39,3 +39,38 @@ def test_bad_text_is_refused_with_a_clear_error(encoder):
             encoder.encode(bad)
     with pytest.raises(ValueError, match="no text"):
         encoder.encode([])
+
+
+def test_descriptions_cover_every_label_and_keep_held_out_phrasings_apart():
+    from facelib import descriptions
+    from facelib.face.expressions import ALL_LABELS
+    assert descriptions.raw_text("high_smile") == "high smile"
+    every_train, every_held = set(), set()
+    for label in ALL_LABELS:
+        train, held = descriptions.phrasings(label, "train"), descriptions.phrasings(label, "held_out")
+        assert train[0] == descriptions.raw_text(label) and len(train) >= 3 and len(held) >= 2
+        every_train |= set(train)
+        every_held |= set(held)
+        for kind in ("N2E", "E2N"):
+            assert all("neutral" in s for s in descriptions.enriched_texts(label, kind, "train"))
+            assert set(descriptions.enriched_texts(label, kind, "train")).isdisjoint(
+                descriptions.enriched_texts(label, kind, "held_out"))
+    assert every_train.isdisjoint(every_held) and len(every_train) == 3 * len(ALL_LABELS)
+    assert descriptions.enriched_texts("mouth_open", "N2E")[0] == "from the neutral face to mouth open"
+    assert descriptions.enriched_texts("mouth_open", "E2N")[0] == "from mouth open to the neutral face"
+    for call, msg in [(lambda: descriptions.phrasings("smile"), "allowed"), (lambda: descriptions.phrasings("happy", "test"), "held_out"),
+                      (lambda: descriptions.enriched_texts("happy", "X2Y"), "N2E")]:
+        with pytest.raises(ValueError, match=msg):
+            call()
+
+
+def test_held_out_paraphrases_are_closer_to_their_label_than_to_others(encoder):
+    # the premise of the held-out evaluation of chapter 06: the encoder maps a paraphrase nearer
+    # its own label's training phrasings than most other labels' (measured, not assumed)
+    from facelib import descriptions
+    from facelib.face.expressions import ALL_LABELS
+    train = {y: encoder.encode(list(descriptions.phrasings(y))).mean(0) for y in ALL_LABELS}
+    centroids = np.stack([train[y] / np.linalg.norm(train[y]) for y in ALL_LABELS])
+    hits = [int(np.argmax(centroids @ encoder.encode(p)) == i) for i, y in enumerate(ALL_LABELS)
+            for p in descriptions.phrasings(y, "held_out")]
+    assert np.mean(hits) > 0.6, np.mean(hits)
