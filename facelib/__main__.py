@@ -97,6 +97,8 @@ def _sample(args):
             "steps": args.steps or denoiser.diffusion.num_steps, "checkpoint": args.checkpoint or f"denoiser_{args.dataset}",
             "checkpoint_sha256": denoiser.meta["sha256"]}
     extra = {}
+    lr = tasks.ADAGRAD_LR if args.lr is None else args.lr  # the guided tasks' Alg. 1 settings
+    weight = guidance.GUIDANCE_WEIGHT if args.guidance_weight is None else args.guidance_weight
     if args.task == "unconditional":
         landmarks = tasks.unconditional(args.n, num_frames=args.length, seed=args.seed, steps=args.steps,
                                         denoiser=denoiser)
@@ -116,8 +118,6 @@ def _sample(args):
         if args.neutral is None:
             raise ValueError("--task geometry needs --neutral neutral.npz (key 'neutral' or 'landmarks', (68, 3) mm)")
         neutral = _read_npz_array(args.neutral, ["neutral", "landmarks"], "the neutral landmarks")
-        lr = tasks.ADAGRAD_LR if args.lr is None else args.lr
-        weight = guidance.GUIDANCE_WEIGHT if args.guidance_weight is None else args.guidance_weight
         label = tasks.order_sensitive_label(args.label, args.order)
         landmarks = tasks.geometry_adaptive(neutral, label, n=args.n, num_frames=args.length, passes=args.passes,
                                             steps=args.steps, reconstruction_scale=args.reconstruction_scale,
@@ -128,8 +128,6 @@ def _sample(args):
                     guidance_weight=weight, adagrad_lr=lr, classifier="guide_" + args.dataset + "_S")
         extra["labels"] = np.array([label] * args.n)
     else:
-        lr = tasks.ADAGRAD_LR if args.lr is None else args.lr
-        weight = guidance.GUIDANCE_WEIGHT if args.guidance_weight is None else args.guidance_weight
         landmarks = tasks.label_control(args.label, args.n, dataset=args.dataset, num_frames=args.length,
                                         steps=args.steps, guidance_weight=weight, lr=lr,
                                         seed=args.seed, denoiser=denoiser)

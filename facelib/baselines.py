@@ -90,9 +90,9 @@ def load_filler(dataset="coma", checkpoint=None):
 @torch.no_grad()
 def lstm_fill(sequences, known, filler=None, dataset="coma", seed=0):
     """Fill the unknown frames with the LSTM filler; (n, F, 68, 3) float32 mm, known frames kept exactly."""
-    from .inpainting import _check_fill_input
-    x, mask = _check_fill_input(sequences, known)
+    from .inpainting import check_fill_input, keep_known
+    x, mask = check_fill_input(sequences, known)
     filler = filler or load_filler(dataset)
-    xn = torch.as_tensor(filler.normalizer.normalize(np.where(mask[..., None, None], x, 0.0)))
+    xn = torch.as_tensor(filler.normalizer.normalize(x))
     out = filler.normalizer.denormalize(filler(xn, torch.as_tensor(mask), generator=torch.Generator().manual_seed(seed)))
-    return np.where(mask[..., None, None], x, out.numpy()).astype(np.float32)
+    return keep_known(out.numpy(), x, mask)

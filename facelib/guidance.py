@@ -42,6 +42,14 @@ def classifier_score(classifier, labels):
     return lambda x, t: classifier.log_prob(x, t, labels.to(x.device))
 
 
+def gradient_at(xt, fn):
+    """grad_x sum(fn(x)) at x = x_t (fn returns one value per sequence), with gradients enabled
+    even inside the sampler's no-grad loop."""
+    with torch.enable_grad():
+        x = xt.detach().clone().requires_grad_(True)
+        return torch.autograd.grad(fn(x).sum(), x)[0]
+
+
 def _check_positive(name, value, allow_zero=False):
     if not isinstance(value, (int, float)) or isinstance(value, bool) or value != value or value < 0 or (value == 0 and not allow_zero):
         raise ValueError(f"{name} must be a {'non-negative' if allow_zero else 'positive'} number, got {value!r}")
@@ -93,9 +101,7 @@ class MeanShiftGuidance:
         _check_positive("scale", self.scale, allow_zero=True)
 
     def __call__(self, x_hat, xt, t, out):
-        with torch.enable_grad():
-            x = xt.detach().clone().requires_grad_(True)
-            grad = torch.autograd.grad(self.score(x, self.diffusion.model_time(t, len(x)).to(x.device)).sum(), x)[0]
+        grad = gradient_at(xt, lambda x: self.score(x, self.diffusion.model_time(t, len(x)).to(x.device)))
         return x_hat + self.scale * out["variance"] * grad
 
 
@@ -119,13 +125,13 @@ class ReconstructionGuidance:
     def __post_init__(self):
         _check_positive("the reconstruction guidance scale", self.scale, allow_zero=True)
 
+    def known_error(self, x, t):
+        """||x0_hat(x)|S_K - x_0|S_K|| per sequence (B,)."""
+        eps = self.model(x, self.diffusion.model_time(t, len(x)).to(x.device))
+        return (((self.diffusion.predict_x0(x, t, eps) - self.x0) ** 2).sum((2, 3)) * self.known).sum(1).sqrt()
+
     def __call__(self, x_hat, xt, t, out):
-        with torch.enable_grad():
-            x = xt.detach().clone().requires_grad_(True)
-            eps = self.model(x, self.diffusion.model_time(t, len(x)).to(x.device))
-            error = ((self.diffusion.predict_x0(x, t, eps) - self.x0) ** 2).sum((2, 3)) * self.known
-            grad = torch.autograd.grad(error.sum(1).sqrt().sum(), x)[0]
-        return x_hat - self.scale * grad
+        return x_hat - self.scale * gradient_at(xt, lambda x: self.known_error(x, t))
 
 
 def chain(*guides):

@@ -120,15 +120,15 @@ def mean_imputation(sequences, known):
     Our reading of the paper's undefined "mean imputation" (§5.3): the per-sequence mean over time,
     the classic imputation of a missing value by the mean of the observed ones; it keeps the
     subject's anatomy (a dataset mean would not) and carries no motion."""
-    x, m = _check_fill_input(sequences, known)
-    mean = np.where(m[..., None, None], x, 0.0).sum(1, keepdims=True) / m.sum(1)[:, None, None, None]
-    return np.where(m[..., None, None], x, mean).astype(np.float32)
+    x, m = check_fill_input(sequences, known)
+    mean = x.sum(1, keepdims=True) / m.sum(1)[:, None, None, None]  # unknown frames are zero
+    return keep_known(mean, x, m)
 
 
 def linear_interpolation(sequences, known):
     """Baseline: missing frames linearly interpolated between the nearest known frames; before the
     first (after the last) known frame, that frame is held constant."""
-    x, m = _check_fill_input(sequences, known)
+    x, m = check_fill_input(sequences, known)
     out = np.zeros_like(x)
     frames = np.arange(x.shape[1])
     for i in range(len(x)):
@@ -138,8 +138,15 @@ def linear_interpolation(sequences, known):
     return out.astype(np.float32)
 
 
-def _check_fill_input(sequences, known):
-    """(x, mask) as (n, F, 68, 3) float64 and (n, F) bool; unknown frames may hold anything (even NaN)."""
+def keep_known(filled, given, known):
+    """``filled`` (n, F, 68, 3) with its known frames replaced by the given ones, float32: every
+    filler returns the known frames exactly as given."""
+    return np.where(known[..., None, None], given, filled).astype(np.float32)
+
+
+def check_fill_input(sequences, known):
+    """(x, mask) as (n, F, 68, 3) float64 and (n, F) bool.  The unknown frames may hold anything
+    (even NaN): they are set to zero here, so that nothing of them can reach a filler."""
     x = np.asarray(sequences, dtype=np.float64)
     if x.ndim == 3:
         x = x[None]
@@ -151,4 +158,4 @@ def _check_fill_input(sequences, known):
         raise ValueError(f"mask {m.shape} does not match {len(x)} sequences of {x.shape[1]} frames")
     if not np.isfinite(x[m]).all():
         raise ValueError("the known frames contain NaN or infinite values")
-    return x, m
+    return np.where(m[..., None, None], x, 0.0), m

@@ -17,9 +17,9 @@ from .data import LandmarkNormalizer
 from .diffusion import GaussianDiffusion, named_betas
 from .evaluation import check_class_names
 from .face.sequences import check_num_frames
-from .inpainting import KnownFrames, _check_fill_input
 from .guidance import (GUIDANCE_WEIGHT, MeanShiftGuidance, OptimisationGuidance, ReconstructionGuidance,
                        chain, classifier_score)
+from .inpainting import KnownFrames, check_fill_input, keep_known
 from .models.denoiser import Denoiser, DenoiserConfig
 from .models.noisy_classifier import NoisyClassifier, NoisyClassifierConfig
 
@@ -52,9 +52,9 @@ def load_denoiser(name=DEFAULT_DENOISER, variance="beta"):
     return TrainedDenoiser(model, LandmarkNormalizer.from_dict(meta["normalizer"]), diffusion, meta)
 
 
-def _check_n(n):
+def _check_n(n, name="n"):
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
-        raise ValueError(f"n must be a positive integer, got {n!r}")
+        raise ValueError(f"{name} must be a positive integer, got {n!r}")
 
 
 @dataclass
@@ -159,23 +159,18 @@ def fill(sequences, known, steps=None, resample=1, reconstruction_scale=0.0, see
     reconstruction_scale > 0 adds reconstruction guidance (not in the paper; chapters 07-08).
     Returns (n, F, 68, 3) float32 in mm whose known frames equal the given ones exactly.
     """
-    x, mask = _check_fill_input(sequences, known)
+    x, mask = check_fill_input(sequences, known)
     denoiser = denoiser or load_denoiser(f"denoiser_{dataset}")
     diffusion = denoiser.diffusion_with(steps)
-    x0 = torch.as_tensor(denoiser.normalizer.normalize(np.where(mask[..., None, None], x, 0.0)))
+    x0 = torch.as_tensor(denoiser.normalizer.normalize(x))
     mask_t = torch.as_tensor(mask)
     reconstruction = (ReconstructionGuidance(denoiser.model, diffusion, x0, mask_t, reconstruction_scale)
                       if reconstruction_scale else None)
     hook = KnownFrames(diffusion, x0, mask_t, _known_noise(seed), inner=reconstruction)
     out = diffusion.sample(denoiser.model, x0.shape, seed=seed, x_T=hook.start(torch.Generator().manual_seed(seed)),
                            guide=hook, progress=progress, callback=callback, resample=resample)
-    return _keep_known(denoiser.normalizer.denormalize(out.detach()).numpy(), x, mask)
-
-
-def _keep_known(generated_mm, given_mm, mask):
-    """The known frames, exactly as given (the sampler returns them through normalise/denormalise,
-    which is exact only to float rounding, ~1e-6 mm)."""
-    return np.where(mask[..., None, None], given_mm, generated_mm).astype(np.float32)
+    # the sampler returns the known frames through normalise/denormalise, exact only to ~1e-6 mm
+    return keep_known(denoiser.normalizer.denormalize(out.detach()).numpy(), x, mask)
 
 
 def order_sensitive_label(label, order=None):
@@ -195,7 +190,8 @@ def order_sensitive_label(label, order=None):
 
 def geometry_adaptive(neutral_landmarks, label, order=None, n=1, num_frames=40, passes=HARMONISING_PASSES,
                       steps=None, renoise_step=None, resample=1, reconstruction_scale=0.0,
-                      guidance_weight=GUIDANCE_WEIGHT, lr=ADAGRAD_LR, seed=0, dataset="coma", denoiser=None, guide=None, return_passes=False, progress=True):
+                      guidance_weight=GUIDANCE_WEIGHT, lr=ADAGRAD_LR, seed=0, dataset="coma", denoiser=None,
+                      guide=None, return_passes=False, progress=True):
     """Geometry-adaptive generation with label control (Alg. 4): n sequences of a given face.
 
     neutral_landmarks: (68, 3) (or (n, 68, 3)) neutral landmarks in mm of the face to animate.
@@ -212,8 +208,7 @@ def geometry_adaptive(neutral_landmarks, label, order=None, n=1, num_frames=40, 
     """
     _check_n(n)
     num_frames = check_num_frames(num_frames)
-    if isinstance(passes, bool) or not isinstance(passes, (int, np.integer)) or passes < 1:
-        raise ValueError(f"passes must be a positive integer, got {passes!r}")
+    _check_n(passes, "passes")
     neutral = np.asarray(neutral_landmarks, dtype=np.float64)
     if neutral.shape == (68, 3):
         neutral = np.broadcast_to(neutral, (n, 68, 3))
@@ -254,5 +249,5 @@ def geometry_adaptive(neutral_landmarks, label, order=None, n=1, num_frames=40, 
             start, first = diffusion.q_sample(x, torch.full((n,), restart), generator=gen), restart
         x = diffusion.sample(denoiser.model, x0.shape, seed=seed + 7919 * i, x_T=start, guide=hook,
                              progress=progress, start_step=first, resample=resample).detach()
-        results.append(_keep_known(denoiser.normalizer.denormalize(x).numpy(), given, mask))
+        results.append(keep_known(denoiser.normalizer.denormalize(x).numpy(), given, mask))
     return np.stack(results) if return_passes else results[-1]
