@@ -34,8 +34,8 @@ def _data(args):
     return status
 
 
-TRAINABLE = ("denoiser", "guide", "evaluator", "motion3dgan", "actor", "lstm_filler")
-TASKS = ("unconditional", "label", "fill", "geometry")
+TRAINABLE = ("denoiser", "guide", "text_head", "evaluator", "motion3dgan", "actor", "motionclip", "lstm_filler")
+TASKS = ("unconditional", "label", "text", "fill", "geometry")
 
 
 def _train(args):
@@ -57,6 +57,9 @@ def _train(args):
     elif args.name == "guide":
         cfg = train.GuideTraining(dataset=args.dataset, classifier_type=args.type, seed=args.seed)
         pt, js = train.train_and_save_guide(with_steps(cfg), name=args.out)
+    elif args.name == "text_head":
+        cfg = train.TextHeadTraining(dataset=args.dataset, seed=args.seed)
+        pt, js = train.train_and_save_text_head(with_steps(cfg), name=args.out)
     elif args.name == "evaluator":
         cfg = train.EvaluatorTraining(dataset=args.dataset, classifier_type=args.type, seed=args.seed)
         pt, js = train.train_and_save_evaluator(cfg, name=args.out)
@@ -92,16 +95,25 @@ def _sample(args):
         raise ValueError(f"unknown task {args.task!r}; allowed: {', '.join(TASKS)}")
     if args.task in ("label", "geometry") and args.label is None:
         raise ValueError(f"--task {args.task} needs --label (e.g. --label high_smile)")
-    denoiser = tasks.load_denoiser(args.checkpoint or f"denoiser_{args.dataset}")
+    if args.task == "text" and args.text is None:
+        raise ValueError('--task text needs --text (e.g. --text "disgust high smile")')
+    dataset = args.dataset or (tasks.TEXT_DATASET if args.task == "text" else "coma")
+    denoiser = tasks.load_denoiser(args.checkpoint or f"denoiser_{dataset}")
     used = {"task": args.task, "n": args.n, "length": args.length, "seed": args.seed,
-            "steps": args.steps or denoiser.diffusion.num_steps, "checkpoint": args.checkpoint or f"denoiser_{args.dataset}",
+            "steps": args.steps or denoiser.diffusion.num_steps, "checkpoint": args.checkpoint or f"denoiser_{dataset}",
             "checkpoint_sha256": denoiser.meta["sha256"]}
     extra = {}
-    lr = tasks.ADAGRAD_LR if args.lr is None else args.lr  # the guided tasks' Alg. 1 settings
+    lr = (tasks.TEXT_LR if args.task == "text" else tasks.ADAGRAD_LR) if args.lr is None else args.lr  # Alg. 1-2 settings
     weight = guidance.GUIDANCE_WEIGHT if args.guidance_weight is None else args.guidance_weight
     if args.task == "unconditional":
         landmarks = tasks.unconditional(args.n, num_frames=args.length, seed=args.seed, steps=args.steps,
                                         denoiser=denoiser)
+    elif args.task == "text":
+        landmarks = tasks.text_control(args.text, args.n, dataset=dataset, num_frames=args.length, steps=args.steps,
+                                       guidance_weight=weight, lr=lr, seed=args.seed, denoiser=denoiser)
+        used.update(dataset=dataset, text=args.text, guidance_weight=weight, adagrad_lr=lr,
+                    adagrad_steps=guidance.ADAGRAD_STEPS, text_head=f"guide_{dataset}_text")
+        extra["texts"] = np.array([args.text] * args.n)
     elif args.task == "fill":
         if args.input is None or args.known is None:
             raise ValueError("--task fill needs --input seq.npz (key 'landmarks') and --known ranges, e.g. 0:10,30:40")
@@ -122,17 +134,17 @@ def _sample(args):
         landmarks = tasks.geometry_adaptive(neutral, label, n=args.n, num_frames=args.length, passes=args.passes,
                                             steps=args.steps, reconstruction_scale=args.reconstruction_scale,
                                             guidance_weight=weight, lr=lr, seed=args.seed,
-                                            dataset=args.dataset, denoiser=denoiser)
-        used.update(dataset=args.dataset, label=label, neutral=args.neutral, passes=args.passes,
+                                            dataset=dataset, denoiser=denoiser)
+        used.update(dataset=dataset, label=label, neutral=args.neutral, passes=args.passes,
                     reconstruction_scale=args.reconstruction_scale,
-                    guidance_weight=weight, adagrad_lr=lr, classifier="guide_" + args.dataset + "_S")
+                    guidance_weight=weight, adagrad_lr=lr, classifier="guide_" + dataset + "_S")
         extra["labels"] = np.array([label] * args.n)
     else:
-        landmarks = tasks.label_control(args.label, args.n, dataset=args.dataset, num_frames=args.length,
+        landmarks = tasks.label_control(args.label, args.n, dataset=dataset, num_frames=args.length,
                                         steps=args.steps, guidance_weight=weight, lr=lr,
                                         seed=args.seed, denoiser=denoiser)
-        used.update(dataset=args.dataset, label=args.label, guidance_weight=weight, adagrad_lr=lr,
-                    adagrad_steps=guidance.ADAGRAD_STEPS, classifier="guide_" + args.dataset + "_I")
+        used.update(dataset=dataset, label=args.label, guidance_weight=weight, adagrad_lr=lr,
+                    adagrad_steps=guidance.ADAGRAD_STEPS, classifier="guide_" + dataset + "_I")
         extra["labels"] = np.array([args.label] * args.n)
     np.savez(args.out, landmarks=landmarks.astype(np.float32), config=json.dumps(used), **extra)
     print(f"wrote {args.out}: landmarks {landmarks.shape} float32 (mm); config {used}")
@@ -152,8 +164,8 @@ def main(argv=None):
 
     p = sub.add_parser("train", help="train a model and save it in data/checkpoints (.pt + .json)")
     p.add_argument("name", help="what to train: " + ", ".join(TRAINABLE) + " (guide: the noisy classifier "
-                   "of Alg. 1; evaluator: the independent LSTM classifier of §5; motion3dgan, actor: the baselines of Table 1)")
-    p.add_argument("--dataset", default="coma", choices=list(config.DATASETS))
+                   "of Alg. 1; text_head: BiT(x_t, t) of Alg. 2, use --dataset coma+bu; evaluator: the independent LSTM classifier of §5; motion3dgan, actor: the baselines of Table 1; motionclip: the baseline of Table 2, use --dataset coma+bu)")
+    p.add_argument("--dataset", default="coma", choices=list(data.DATASET_NAMES))
     p.add_argument("--type", default="I", choices=list(data.CLASSIFIER_TYPES), help="classifier type (guide, evaluator): "
                    "I = label, S = label x N2E/E2N")
     p.add_argument("--variable-length", action="store_true", help="train on lengths 35-45 (paper App. A)")
@@ -164,10 +176,13 @@ def main(argv=None):
     p.set_defaults(func=_train)
 
     p = sub.add_parser("sample", help="generate landmark sequences and write them to an .npz")
-    p.add_argument("--task", default="unconditional", help="unconditional, label (Alg. 1), fill (Alg. 3) "
-                   "or geometry (Alg. 4)")
-    p.add_argument("--dataset", default="coma", choices=list(config.DATASETS))
+    p.add_argument("--task", default="unconditional", help="unconditional, label (Alg. 1), text (Alg. 2), "
+                   "fill (Alg. 3) or geometry (Alg. 4)")
+    p.add_argument("--dataset", default=None, choices=list(data.DATASET_NAMES),
+                   help="default: coma (coma+bu, the paper's merged set, for --task text)")
     p.add_argument("--label", default=None, help="expression label for --task label or geometry (e.g. high_smile)")
+    p.add_argument("--text", default=None, help='--task text: what to show, e.g. "disgust high smile" or '
+                   '"from the neutral face to bareteeth"')
     p.add_argument("--guidance-weight", type=float, default=None, help="lambda of Alg. 1 (default: the paper's 0.01)")
     p.add_argument("--lr", type=float, default=None, help="Adagrad learning rate of Alg. 1 (default: the book's choice)")
     p.add_argument("--order", default=None, choices=["N2E", "E2N"], help="--task geometry: neutral face first "

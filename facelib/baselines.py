@@ -1,7 +1,11 @@
 """The label-conditioned generative baselines of Table 1 (chapter 05), trained on the same data:
 
 * "motion3dgan": Motion3DGAN-style WGAN-GP on SRVFs (models/motion3dgan.py; the paper's "MoGAN");
-* "actor": ACTOR-style transformer CVAE (models/actor.py).
+* "actor": ACTOR-style transformer CVAE (models/actor.py);
+
+and the text-to-motion baseline of Table 2 (chapter 06):
+
+* "motionclip": MotionCLIP-style deterministic decoder from the text embedding (models/motionclip.py).
 
 ``python -m facelib train motion3dgan --dataset coma`` (or ``actor``) retrains one; the shipped
 checkpoints are ``<name>_<dataset>`` in data/checkpoints.
@@ -15,11 +19,12 @@ import torch
 
 from . import data
 from .checkpoints import load_checkpoint, save_checkpoint
-from .models import actor, lstm_filler, motion3dgan
+from .models import actor, lstm_filler, motion3dgan, motionclip
 
 BASELINES = {
     "motion3dgan": (motion3dgan, motion3dgan.Motion3DGANTraining, motion3dgan.train_motion3dgan),
     "actor": (actor, actor.ActorTraining, actor.train_actor),
+    "motionclip": (motionclip, motionclip.MotionClipTraining, motionclip.train_motionclip),
 }
 
 
@@ -63,6 +68,16 @@ def generate(model, labels, seed=0):
     if bad or not labels:
         raise ValueError(f"unknown label {bad[0] if bad else None!r}; allowed: {', '.join(model.label_names)}")
     return model.generate(np.array([model.label_names.index(y) for y in labels]), seed=seed)
+
+
+def generate_from_text(model, texts, num_frames=40, encoder=None):
+    """Sequences (n, F, 68, 3) float32 in mm from the MotionCLIP-style baseline, one per text
+    (deterministic: the same text always gives the same sequence)."""
+    from .text import get_encoder
+    texts = [texts] if isinstance(texts, str) else list(texts)
+    if not texts:
+        raise ValueError("need at least one text")
+    return model.generate((encoder or get_encoder()).encode(texts), num_frames)
 
 
 # ------------------------------------------------------------------ the learned filling baseline (Table 3)

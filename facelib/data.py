@@ -1,12 +1,13 @@
 """Synthetic datasets: generation, cache with checksums, splits (paper §4, DESIGN.md).
 
-``load_dataset("coma" | "bu", "train" | "test" | "all", num_frames=40)`` returns a
+``load_dataset("coma" | "bu" | "coma+bu", "train" | "test" | "all", num_frames=40)`` returns a
 :class:`FaceDataset` of landmark sequences (n, F, 68, 3) float32 in mm with integer labels,
 N2E/E2N kinds and subject ids; each subject's neutral mesh and every frame's mesh are
 available on demand.  Datasets are generated deterministically on first use and cached under
 ``data/synthetic/cache`` (the file name carries a hash of the generator's source and
 configuration, so a changed generator never reuses a stale cache).  Each cache file has a
 sha256 sidecar; a file whose checksum does not match is rebuilt with a warning.
+"coma+bu" is not generated: it is the union of the two (paper §5.2, text control: 18 actions).
 """
 from __future__ import annotations
 
@@ -36,9 +37,22 @@ _SOURCE_FILES = ("face/template.py", "face/identity.py", "face/aus.py", "face/ex
                  "face/sequences.py", "data.py", "config.py")
 
 
+MERGED_DATASETS = {"coma+bu": ("coma", "bu")}  # paper §5.2: "merging CoMA and BU-4DFE" (18 actions)
+DATASET_NAMES = (*config.DATASETS, *MERGED_DATASETS)
+
+
 def check_dataset_name(name):
-    if name not in config.DATASETS:
-        raise ValueError(f"unknown dataset {name!r}; allowed: {', '.join(config.DATASETS)}")
+    """The name of a loadable dataset (generated or merged); a clear error listing them if unknown."""
+    if name not in DATASET_NAMES:
+        raise ValueError(f"unknown dataset {name!r}; allowed: {', '.join(DATASET_NAMES)}")
+    return name
+
+
+def generated_spec(name):
+    """The :class:`~facelib.config.DatasetSpec` of a generated dataset (merged ones have none)."""
+    if check_dataset_name(name) not in config.DATASETS:
+        raise ValueError(f"dataset {name!r} is not generated but merged from {MERGED_DATASETS[name]}; "
+                         f"generated datasets: {', '.join(config.DATASETS)}")
     return config.DATASETS[name]
 
 
@@ -167,7 +181,7 @@ def _atomic_write(path, write):
 
 
 def cache_path(name, num_frames=40, cache_dir=None):
-    spec = check_dataset_name(name)
+    spec = generated_spec(name)
     num_frames = _check_length(num_frames)
     tag = f"F{num_frames}" if isinstance(num_frames, int) else f"F{num_frames[0]}-{num_frames[1]}"
     return Path(cache_dir or config.cache_dir()) / f"{name}-{tag}-{generator_fingerprint(spec, num_frames)}.npz"
@@ -190,7 +204,7 @@ def _read_verified(path):
 
 def build(name, num_frames=40, cache_dir=None, rebuild=False):
     """Arrays of the whole dataset: read from the verified cache, or generated and cached."""
-    spec = check_dataset_name(name)
+    spec = generated_spec(name)
     path = cache_path(name, num_frames, cache_dir)
     arrays = None if rebuild else _read_verified(path)
     if arrays is None:
@@ -320,12 +334,16 @@ class FaceDataset:
 def load_dataset(name, split="train", num_frames=40, cache_dir=None, rebuild=False):
     """Load (generating and caching on first use) a split of a synthetic dataset.
 
-    name: "coma" (12 CoMA-like labels, 12 subjects, 689 sequences) or "bu" (6 emotions,
-    101 subjects, 1212 sequences).  split: "train", "test" (held-out subjects) or "all".
+    name: "coma" (12 CoMA-like labels, 12 subjects, 689 sequences), "bu" (6 emotions,
+    101 subjects, 1212 sequences) or "coma+bu" (their union, 18 labels, 113 subjects: see
+    :func:`merge`).  split: "train", "test" (held-out subjects) or "all".
     num_frames: an int in [2, 400] (40 in the paper) or a (low, high) range for variable lengths.
     """
-    spec = check_dataset_name(name)
+    check_dataset_name(name)
     check_split(split)
+    if name in MERGED_DATASETS:
+        return merge([load_dataset(part, split, num_frames, cache_dir, rebuild) for part in MERGED_DATASETS[name]], name)
+    spec = generated_spec(name)
     arrays = build(name, num_frames, cache_dir, rebuild)
     held_out = np.isin(arrays["subjects"], arrays["test_subjects"])
     sel = {"train": ~held_out, "test": held_out, "all": np.ones_like(held_out)}[split]
@@ -334,6 +352,26 @@ def load_dataset(name, split="train", num_frames=40, cache_dir=None, rebuild=Fal
                      arrays["identity_coeffs"], LABEL_SETS[spec.label_set],
                      extra={"test_subjects": arrays["test_subjects"]})
     return ds.subset(sel, split)
+
+
+def merge(parts, name):
+    """One dataset from several (paper §5.2): labels are the union in order (12 CoMA-like then 6
+    emotions for "coma+bu"); subject ids of each part are offset by the subjects before it, so
+    every subject keeps its own face; splits stay as they were (test subjects stay test)."""
+    if len({p.split for p in parts}) != 1 or len({p.landmarks.shape[1] for p in parts}) != 1:
+        raise ValueError("datasets to merge must be the same split with the same number of frames")
+    names = tuple(label for p in parts for label in p.label_names)
+    if len(set(names)) != len(names):
+        raise ValueError(f"datasets to merge share labels: {names}")
+    label_offsets = np.cumsum([0] + [len(p.label_names) for p in parts])
+    subject_offsets = np.cumsum([0] + [len(p.identity_coeffs) for p in parts])
+    cat = lambda key: np.concatenate([getattr(p, key) for p in parts])
+    return FaceDataset(name, parts[0].split, cat("landmarks"),
+                       np.concatenate([p.labels + o for p, o in zip(parts, label_offsets)]), cat("kinds"),
+                       np.concatenate([p.subjects + o for p, o in zip(parts, subject_offsets)]), cat("lengths"),
+                       cat("au_weights"), cat("identity_coeffs"), names,
+                       extra={"test_subjects": np.concatenate([p.extra["test_subjects"] + o
+                                                               for p, o in zip(parts, subject_offsets)])})
 
 
 def expression_split(dataset, held_out):
@@ -376,7 +414,7 @@ def generator_config():
 
 def summary(name, arrays):
     """A printable summary of a whole dataset: counts per split, label, kind, subject; value ranges."""
-    spec = check_dataset_name(name)
+    spec = generated_spec(name)
     labels = LABEL_SETS[spec.label_set]
     held_out = np.isin(arrays["subjects"], arrays["test_subjects"])
     lm = arrays["landmarks"]

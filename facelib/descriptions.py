@@ -76,4 +76,10 @@ def enriched_texts(label, kind, split="train"):
     return tuple(t[column].format(x=x) for t in ENRICHED_TEMPLATES[split] for x in phrasings(label, split))
 
 
+def descriptions(label, kind, split="train"):
+    """Every description of a sequence of ``label`` performed in order ``kind`` (N2E / E2N): its
+    phrasings (the raw-text task) and its enriched sentences (the enriched-text task)."""
+    return phrasings(label, split) + enriched_texts(label, kind, split)
+
+
 assert set(PARAPHRASES) == set(ALL_LABELS), "every label needs its paraphrases"

@@ -42,6 +42,11 @@ def classifier_score(classifier, labels):
     return lambda x, t: classifier.log_prob(x, t, labels.to(x.device))
 
 
+def text_score(head, text_embeddings):
+    """score(x, t) = cos(BiT(x, t), E(c)) (B,) of the text head for text embeddings (B, D) (Eq. 10)."""
+    return lambda x, t: head.cosine(x, t, text_embeddings.to(x.device))
+
+
 def gradient_at(xt, fn):
     """grad_x sum(fn(x)) at x = x_t (fn returns one value per sequence), with gradients enabled
     even inside the sampler's no-grad loop."""

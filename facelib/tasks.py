@@ -1,7 +1,7 @@
 """The paper's sampling tasks as functions (§3.2, App. C), all on one unconditional DDPM.
 
 Loading the trained denoiser, unconditional generation (§3.1), label control (§3.2, Alg. 1),
-expression filling (Alg. 3) and geometry-adaptive generation (Alg. 4).  Every task uses the same
+text control (Alg. 2), expression filling (Alg. 3) and geometry-adaptive generation (Alg. 4).  Every task uses the same
 unconditional denoiser: it is never retrained, only its reverse process is guided.
 """
 from __future__ import annotations
@@ -18,16 +18,18 @@ from .diffusion import GaussianDiffusion, named_betas
 from .evaluation import check_class_names
 from .face.sequences import check_num_frames
 from .guidance import (GUIDANCE_WEIGHT, MeanShiftGuidance, OptimisationGuidance, ReconstructionGuidance,
-                       chain, classifier_score)
+                       chain, classifier_score, text_score)
 from .inpainting import KnownFrames, check_fill_input, keep_known
 from .models.denoiser import Denoiser, DenoiserConfig
-from .models.noisy_classifier import NoisyClassifier, NoisyClassifierConfig
+from .models.noisy_classifier import NoisyClassifier, NoisyClassifierConfig, NoisyTextHead, TextHeadConfig
 
 DEFAULT_DENOISER = "denoiser_coma"
 ADAGRAD_LR = 0.01  # Alg. 1's Adagrad learning rate: not in the paper; chosen by the sweep of chapter 05
 GUIDANCE_METHODS = ("adagrad", "mean_shift")
 HARMONISING_PASSES = 5  # Alg. 4 line 1: "for i = 1 to 5"
 RECONSTRUCTION_SCALE = 2.0  # our choice for Alg. 4 + reconstruction guidance: the sweep of chapter 08
+TEXT_DATASET = "coma+bu"  # paper §5.2: text control works on CoMA and BU-4DFE merged (18 actions)
+TEXT_LR = 0.01  # Alg. 2's Adagrad learning rate: not in the paper; chosen by the sweep of chapter 06
 
 
 @dataclass
@@ -59,7 +61,9 @@ def _check_n(n, name="n"):
 
 @dataclass
 class TrainedGuide:
-    """A guidance classifier p_phi(y | x_t, t) with its dataset, type and class names."""
+    """A guidance network with its dataset, type and class names: the classifier p_phi(y | x_t, t)
+    of Alg. 1 (type "I" or "S") or the text head BiT(x_t, t) of Alg. 2 (type "text"; its class
+    names are the labels whose descriptions it was trained on)."""
 
     model: NoisyClassifier
     dataset: str
@@ -86,6 +90,21 @@ def load_guide(dataset="coma", classifier_type="I", name=None):
     if meta["training"]["dataset"] != dataset:
         raise ValueError(f"checkpoint {name} was trained on {meta['training']['dataset']!r}, not {dataset!r}")
     return TrainedGuide(model, dataset, classifier_type, names, LandmarkNormalizer.from_dict(meta["normalizer"]), meta)
+
+
+def load_text_head(dataset=TEXT_DATASET, name=None):
+    """Load the shipped text head guide_<dataset>_text (sha256, labels and text encoder checked)."""
+    from .text import EMBEDDING_DIM, MODEL_NAME
+    data.check_dataset_name(dataset)
+    name = name or f"guide_{dataset}_text"
+    model, meta = load_checkpoint(name, "text_head", lambda c: NoisyTextHead(TextHeadConfig(**c)))
+    names = check_class_names(meta["class_names"], dataset, "I", name)
+    if meta["training"]["dataset"] != dataset:
+        raise ValueError(f"checkpoint {name} was trained on {meta['training']['dataset']!r}, not {dataset!r}")
+    if meta.get("text_encoder") != MODEL_NAME or model.config.embedding_dim != EMBEDDING_DIM:
+        raise ValueError(f"checkpoint {name} was trained with the text encoder {meta.get('text_encoder')!r} "
+                         f"({model.config.embedding_dim}-d), not {MODEL_NAME!r} ({EMBEDDING_DIM}-d)")
+    return TrainedGuide(model, dataset, "text", names, LandmarkNormalizer.from_dict(meta["normalizer"]), meta)
 
 
 def check_same_space(denoiser, guide):
@@ -117,17 +136,46 @@ def label_control(label, n=16, dataset="coma", num_frames=40, steps=None, guidan
         raise ValueError(f"method must be one of {GUIDANCE_METHODS}, got {method!r}")
     guide = guide or load_guide(dataset, classifier_type)
     targets = guide.class_indices(labels)
+    score = classifier_score(guide.model, targets)
+    make_guidance = ((lambda diffusion: OptimisationGuidance(score, diffusion, guidance_weight, lr)) if method == "adagrad"
+                     else (lambda diffusion: MeanShiftGuidance(score, diffusion, scale)))
+    return _guided_sample(guide, denoiser, steps, n, num_frames, seed, progress, callback, make_guidance)
+
+
+def _guided_sample(guide, denoiser, steps, n, num_frames, seed, progress, callback, make_guidance):
+    """Sample n sequences (n, F, 68, 3) float32 mm with ``make_guidance(diffusion)`` injected, from the
+    denoiser of the guide's dataset (or the given one, checked to share the guide's space)."""
     denoiser = denoiser or load_denoiser(f"denoiser_{guide.dataset}")
     check_same_space(denoiser, guide)
     diffusion = denoiser.diffusion_with(steps)
-    score = classifier_score(guide.model, targets)
-    if method == "adagrad":
-        guide_fn = OptimisationGuidance(score, diffusion, guidance_weight, lr)
-    else:
-        guide_fn = MeanShiftGuidance(score, diffusion, scale)
-    x = diffusion.sample(denoiser.model, (n, num_frames, 68, 3), seed=seed, guide=guide_fn,
+    x = diffusion.sample(denoiser.model, (n, num_frames, 68, 3), seed=seed, guide=make_guidance(diffusion),
                          progress=progress, callback=callback)
     return denoiser.normalizer.denormalize(x.detach()).numpy()
+
+
+def text_control(text, n=8, dataset=TEXT_DATASET, num_frames=40, steps=None, guidance_weight=GUIDANCE_WEIGHT,
+                 lr=TEXT_LR, seed=0, denoiser=None, head=None, encoder=None, progress=True, callback=None):
+    """Text control (Alg. 2): n sequences (n, F, 68, 3) float32 in mm that show what ``text`` says.
+
+    text: a description ("disgust high smile", "from the neutral face to bareteeth"), or a list of
+    n descriptions (one per sequence).  Each is embedded once by the offline sentence encoder
+    E (facelib/text.py; empty, non-string or too long texts are refused); at every step 3 Adagrad
+    steps maximise lambda log p_theta(x | x_t) + cos(BiT(x, t-1), E(c)) (Eq. 10), lambda =
+    ``guidance_weight``, rate ``lr``.  steps: None for the paper's T = 2000, or fewer (respaced).
+    """
+    from .text import get_encoder
+    _check_n(n)
+    num_frames = check_num_frames(num_frames)
+    texts = [text] * n if isinstance(text, str) else list(text) if isinstance(text, (list, tuple)) else None
+    if texts is None or len(texts) != n:
+        raise ValueError(f"text must be a string or a list of n={n} strings, got {text!r}")
+    embeddings = torch.as_tensor((encoder or get_encoder()).encode(texts))
+    head = head or load_text_head(dataset)
+    if head.classifier_type != "text":
+        raise ValueError("text control needs a text head (load_text_head), not a label classifier")
+    score = text_score(head.model, embeddings)
+    return _guided_sample(head, denoiser, steps, n, num_frames, seed, progress, callback,
+                          lambda diffusion: OptimisationGuidance(score, diffusion, guidance_weight, lr))
 
 
 def unconditional(n, num_frames=40, seed=0, steps=None, denoiser=None, progress=True, callback=None):

@@ -1,5 +1,6 @@
 """Training loops (``python -m facelib train NAME``): the DDPM denoiser of §3.1 / §4, the
-guidance classifiers of §3.2 (Alg. 1) and the independent classifiers of the evaluation (§5).
+guidance classifiers of §3.2 (Alg. 1), the text head of Alg. 2 and the independent classifiers
+of the evaluation (§5).
 
 Paper §4: T = 2000, linear betas 1e-4..0.02, 200K iterations, learning rate 1e-4, batch 256.
 A CPU budget of about 20 minutes on 2 cores allows about 1/50 of that compute, so we train a
@@ -28,7 +29,7 @@ from .checkpoints import save_checkpoint
 from .diffusion import GaussianDiffusion, named_betas
 from .models.classifier import train_classifier
 from .models.denoiser import Denoiser, DenoiserConfig
-from .models.noisy_classifier import NoisyClassifier, NoisyClassifierConfig
+from .models.noisy_classifier import NoisyClassifier, NoisyClassifierConfig, NoisyTextHead, TextHeadConfig
 from .training_log import TrainingLog
 
 
@@ -156,38 +157,47 @@ class GuideTraining:
     model: NoisyClassifierConfig = None  # default: NoisyClassifierConfig(num_classes of the type)
 
 
+def _train_on_noisy_sequences(model, cfg, dataset, batch_loss, desc, metrics, progress, log_every):
+    """The loop shared by the guidance networks: x_t = q_sample(x_0, t) with t ~ U{0..T} (t = 0 is
+    the clean sequence), ``batch_loss(output, idx, generator) -> (loss, {metric: value})`` on
+    model(x_t, t).  The caller seeds torch before building the model (dropout draws follow it)."""
+    gen = torch.Generator().manual_seed(cfg.seed)
+    normalizer = data.LandmarkNormalizer.fit(dataset)  # = the denoiser's (fitted on the same split)
+    x_all = torch.as_tensor(normalizer.normalize(dataset.landmarks))
+    diffusion = GaussianDiffusion(named_betas(cfg.schedule, cfg.num_diffusion_steps))
+    opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+    log = TrainingLog(cfg.steps, log_every, *metrics)
+    model.train()
+    for step in tqdm(range(cfg.steps), desc=desc, disable=not progress):
+        for g in opt.param_groups:
+            g["lr"] = _learning_rate(cfg, step)
+        idx = torch.randint(0, len(x_all), (cfg.batch_size,), generator=gen)
+        t = torch.randint(0, cfg.num_diffusion_steps + 1, (cfg.batch_size,), generator=gen)
+        loss, values = batch_loss(model(diffusion.q_sample(x_all[idx], t, generator=gen), t.float()), idx, gen)
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip)
+        opt.step()
+        log.add(step, **values)
+    return model.eval(), normalizer, log.history
+
+
 def train_guide(cfg=GuideTraining(), progress=True, log_every=50):
     """Train p_phi(y | x_t, t) with cross-entropy on x_t = q_sample(x_0, t), t ~ U{0..T}.
 
     Returns (model, normalizer, history); the normalizer is the denoiser's (fitted on the same split)."""
     data.check_classifier_type(cfg.classifier_type)
-    torch.manual_seed(cfg.seed)
-    gen = torch.Generator().manual_seed(cfg.seed)
     train = data.load_dataset(cfg.dataset, "train")
-    normalizer = data.LandmarkNormalizer.fit(train)
-    x_all = torch.as_tensor(normalizer.normalize(train.landmarks))
     y_all = torch.as_tensor(train.targets(cfg.classifier_type))
     model_cfg = cfg.model or NoisyClassifierConfig(num_classes=len(train.class_names(cfg.classifier_type)))
-    diffusion = GaussianDiffusion(named_betas(cfg.schedule, cfg.num_diffusion_steps))
+    torch.manual_seed(cfg.seed)
     model = NoisyClassifier(model_cfg)
-    opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
-    log = TrainingLog(cfg.steps, log_every, "loss", "accuracy")
-    model.train()
-    for step in tqdm(range(cfg.steps), desc=f"train guide ({cfg.dataset}, type {cfg.classifier_type})",
-                     disable=not progress):
-        for g in opt.param_groups:
-            g["lr"] = _learning_rate(cfg, step)
-        idx = torch.randint(0, len(x_all), (cfg.batch_size,), generator=gen)
-        t = torch.randint(0, cfg.num_diffusion_steps + 1, (cfg.batch_size,), generator=gen)
-        xt = diffusion.q_sample(x_all[idx], t, generator=gen)
-        logits = model(xt, t.float())
+
+    def batch_loss(logits, idx, gen):
         loss = torch.nn.functional.cross_entropy(logits, y_all[idx])
-        opt.zero_grad(set_to_none=True)
-        loss.backward()
-        torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip)
-        opt.step()
-        log.add(step, loss=loss.item(), accuracy=(logits.argmax(1) == y_all[idx]).float().mean().item())
-    return model.eval(), normalizer, log.history
+        return loss, {"loss": loss.item(), "accuracy": (logits.argmax(1) == y_all[idx]).float().mean().item()}
+    return _train_on_noisy_sequences(model, cfg, train, batch_loss, f"train guide ({cfg.dataset}, type "
+                                     f"{cfg.classifier_type})", ("loss", "accuracy"), progress, log_every)
 
 
 def train_and_save_guide(cfg=GuideTraining(), name=None, progress=True):
@@ -198,6 +208,67 @@ def train_and_save_guide(cfg=GuideTraining(), name=None, progress=True):
     return save_checkpoint(name or f"guide_{cfg.dataset}_{cfg.classifier_type}", model, "guide",
                            asdict(model.config), training=training, normalizer=normalizer.to_dict(),
                            class_names=list(data.load_dataset(cfg.dataset, "train").class_names(cfg.classifier_type)),
+                           history=history, torch_version=torch.__version__)
+
+
+@dataclass(frozen=True)
+class TextHeadTraining:
+    """How the shipped text head BiT(x_t, t) of Alg. 2 is trained (§3.2, §5.2; our choices)."""
+
+    dataset: str = "coma+bu"  # paper §5.2: CoMA and BU-4DFE merged (18 actions)
+    steps: int = 4000  # our choice: ~6 min on 2 CPU cores
+    batch_size: int = 64
+    lr: float = 3e-4
+    warmup: int = 200
+    weight_decay: float = 0.01
+    grad_clip: float = 1.0
+    num_diffusion_steps: int = 2000
+    schedule: str = "linear"
+    seed: int = 0
+    model: TextHeadConfig = field(default_factory=TextHeadConfig)
+
+
+def description_embeddings(dataset, encoder, split="train"):
+    """Text embeddings (labels, 2 kinds, K, D) of every description of every (label, order): the
+    raw text, its paraphrases and the enriched sentences of ``split`` (facelib/descriptions.py)."""
+    from .descriptions import descriptions
+    return torch.stack([torch.stack([torch.as_tensor(encoder.encode(list(descriptions(label, kind, split))))
+                                     for kind in dataset.kind_names]) for label in dataset.label_names])
+
+
+def train_text_head(cfg=TextHeadTraining(), encoder=None, progress=True, log_every=50):
+    """Train BiT(x_t, t) to maximise cos(BiT(x_t, t), E(c)), c a random description of x_0
+    (MotionCLIP's cosine loss, §5.2), on x_t = q_sample(x_0, t).  Returns (model, normalizer, history).
+
+    Logged: the loss 1 - cos and the retrieval accuracy (is the label's raw text the nearest of the
+    raw texts to the output?)."""
+    from .text import get_encoder
+    train = data.load_dataset(cfg.dataset, "train")
+    table = description_embeddings(train, encoder or get_encoder())
+    raw = table[:, 0, 0]  # (labels, D): the raw text comes first in every description list
+    labels, kinds = torch.as_tensor(train.labels).long(), torch.as_tensor(train.kinds).long()
+    torch.manual_seed(cfg.seed)
+    model = NoisyTextHead(cfg.model)
+
+    def batch_loss(output, idx, gen):
+        choice = torch.randint(0, table.shape[2], (len(idx),), generator=gen)
+        target = table[labels[idx], kinds[idx], choice]
+        out = torch.nn.functional.normalize(output, dim=-1)
+        loss = 1 - (out * target).sum(-1).mean()
+        hit = (out @ raw.T).argmax(1) == labels[idx]
+        return loss, {"loss": loss.item(), "accuracy": hit.float().mean().item()}
+    return _train_on_noisy_sequences(model, cfg, train, batch_loss, f"train text head ({cfg.dataset})",
+                                     ("loss", "accuracy"), progress, log_every)
+
+
+def train_and_save_text_head(cfg=TextHeadTraining(), name=None, progress=True):
+    """Train the text head and save it as guide_<dataset>_text in data/checkpoints."""
+    from .text import MODEL_NAME
+    model, normalizer, history = train_text_head(cfg, progress=progress)
+    training = asdict(cfg)
+    return save_checkpoint(name or f"guide_{cfg.dataset}_text", model, "text_head", asdict(model.config),
+                           training=training, normalizer=normalizer.to_dict(), text_encoder=MODEL_NAME,
+                           class_names=list(data.load_dataset(cfg.dataset, "train").label_names),
                            history=history, torch_version=torch.__version__)
 
 

@@ -1,0 +1,151 @@
+"""Text control (Alg. 2): the merged 18-action dataset, the text head, the task, the baseline, the CLI."""
+import json
+import shutil
+
+import numpy as np
+import pytest
+import torch
+
+from facelib import baselines, data, descriptions, evaluation, tasks, text
+from facelib.diffusion import GaussianDiffusion, linear_betas
+from facelib.guidance import OptimisationGuidance, text_score
+from facelib.models.noisy_classifier import NoisyTextHead, TextHeadConfig
+
+
+@pytest.fixture(scope="module")
+def head():
+    return tasks.load_text_head()
+
+
+@pytest.fixture(scope="module")
+def denoiser():
+    return tasks.load_denoiser("denoiser_coma+bu")
+
+
+def test_merged_dataset_keeps_every_sequence_face_label_and_split():
+    for split in ("train", "test"):
+        merged = data.load_dataset("coma+bu", split)
+        coma, bu = data.load_dataset("coma", split), data.load_dataset("bu", split)
+        assert len(merged) == len(coma) + len(bu) and merged.label_names == coma.label_names + bu.label_names
+        assert len(merged.label_names) == 18
+        np.testing.assert_array_equal(merged.landmarks[len(coma):], bu.landmarks)
+        assert [merged.label_of(len(coma) + i) for i in (0, 7)] == [bu.label_of(0), bu.label_of(7)]
+        # a BU subject keeps its own face: subject ids are offset by CoMA's 12 subjects
+        i = len(coma) + 5
+        np.testing.assert_array_equal(merged.neutral_landmarks(int(merged.subjects[i])),
+                                      bu.neutral_landmarks(int(bu.subjects[5])))
+    train, test = data.load_dataset("coma+bu", "train"), data.load_dataset("coma+bu", "test")
+    assert not set(train.subjects) & set(test.subjects)  # held-out subjects stay held out
+    assert set(test.subjects) == set(test.extra["test_subjects"])
+    with pytest.raises(ValueError, match="not generated but merged"):
+        data.build("coma+bu")
+    with pytest.raises(ValueError, match="allowed: coma, bu, coma\\+bu"):
+        data.load_dataset("coma+bu4d")
+
+
+def test_descriptions_put_the_raw_text_first_and_keep_held_out_apart():
+    train = descriptions.descriptions("high_smile", "N2E")
+    assert train[0] == "high smile" and "from the neutral face to high smile" in train
+    assert "from high smile to the neutral face" in descriptions.descriptions("high_smile", "E2N")
+    held_out = descriptions.descriptions("high_smile", "N2E", "held_out")
+    assert not set(held_out) & set(train)
+    assert all(not set(descriptions.descriptions(y, k, "held_out")) & set(descriptions.descriptions(y, k))
+               for y in descriptions.ALL_LABELS for k in ("N2E", "E2N"))
+
+
+def test_text_head_outputs_unit_vectors_of_motion():
+    torch.manual_seed(0)
+    h = NoisyTextHead(TextHeadConfig(embedding_dim=16, width=32, depth=1, heads=2, ff=32, dropout=0.0)).eval()
+    x, t = torch.randn(3, 10, 68, 3), torch.tensor([0.0, 10.0, 500.0])
+    e = h.embed(x, t)
+    assert e.shape == (3, 16)
+    torch.testing.assert_close(e.norm(dim=1), torch.ones(3))
+    torch.testing.assert_close(h.embed(x + torch.randn(3, 1, 68, 3), t), e, atol=1e-5, rtol=1e-5)  # motion only
+    c = torch.randn(16)
+    cos = h.cosine(x, t, c)
+    assert cos.shape == (3,) and (cos.abs() <= 1 + 1e-6).all()
+    torch.testing.assert_close(cos, torch.nn.functional.cosine_similarity(h(x, t), c[None], dim=1))
+
+
+def test_one_guided_step_increases_the_cosine_with_the_text(head):
+    # Alg. 2 line 10 with lambda = 0: pure ascent of cos(BiT(x, t-1), E(c)) from x_hat_{t-1}.
+    diffusion = GaussianDiffusion(linear_betas(2000))
+    emb = torch.as_tensor(text.get_encoder().encode(["high smile", "from the neutral face to anger", "sad", "beaming"]))
+    score = text_score(head.model, emb)
+    gen = torch.Generator().manual_seed(0)
+    xt = torch.randn(4, 40, 68, 3, generator=gen)
+    out = {"mean": xt * 0.99, "variance": torch.full((4, 1, 1, 1), 0.02)}
+    x_hat = out["mean"] + 0.14 * torch.randn(xt.shape, generator=gen)
+    t = 300
+    t_prev = diffusion.model_time(t - 1, 4)
+    guided = OptimisationGuidance(score, diffusion, guidance_weight=0.0, lr=0.01)(x_hat, xt, t, out)
+    assert (score(guided, t_prev) > score(x_hat, t_prev)).all()
+
+
+def test_text_control_is_deterministic_and_follows_the_text(head, denoiser):
+    labels = ["high_smile", "mouth_open", "happy", "surprise", "eyebrow", "anger"]
+    texts = [descriptions.raw_text(y) for y in labels]
+    kwargs = dict(steps=50, seed=5, progress=False, head=head, denoiser=denoiser)
+    guided = tasks.text_control(texts, len(texts), **kwargs)
+    assert guided.shape == (6, 40, 68, 3) and guided.dtype == np.float32
+    assert np.array_equal(guided, tasks.text_control(texts, len(texts), **kwargs))
+    unguided = tasks.unconditional(len(texts), steps=50, seed=5, progress=False, denoiser=denoiser)
+    ev = evaluation.load_evaluator("coma+bu")
+    targets = [ev.class_index(y) for y in labels]
+    p_guided = torch.softmax(torch.as_tensor(ev.features(guided)), 1)[np.arange(6), targets]
+    p_unguided = torch.softmax(torch.as_tensor(ev.features(unguided)), 1)[np.arange(6), targets]
+    assert p_guided.mean() > p_unguided.mean() + 0.2
+
+
+@pytest.mark.parametrize("bad, message", [("", "empty"), ("   ", "empty"), (42, "string"), (["sad", 3], "string"),
+                                          ("smile " * 300, "word pieces")])
+def test_text_control_refuses_bad_text(bad, message, head, denoiser):
+    n = len(bad) if isinstance(bad, list) else 1
+    with pytest.raises(ValueError, match=message):
+        tasks.text_control(bad, n, steps=2, progress=False, head=head, denoiser=denoiser)
+
+
+def test_text_control_checks_n_and_the_head(head, denoiser):
+    with pytest.raises(ValueError, match="list of n=3"):
+        tasks.text_control(["sad", "happy"], 3, steps=2, progress=False, head=head, denoiser=denoiser)
+    with pytest.raises(ValueError, match="positive integer"):
+        tasks.text_control("sad", 0, steps=2, progress=False, head=head, denoiser=denoiser)
+    with pytest.raises(ValueError, match="needs a text head"):
+        tasks.text_control("sad", 1, steps=2, progress=False, head=tasks.load_guide("coma"), denoiser=denoiser)
+    with pytest.raises(ValueError, match="normalise landmarks differently"):
+        tasks.text_control("sad", 1, steps=2, progress=False, head=head, denoiser=tasks.load_denoiser("denoiser_coma"))
+
+
+def test_text_head_checkpoint_checks_its_encoder_and_labels(tmp_path):
+    pt, js = (tasks.config.CHECKPOINT_DIR / f"guide_coma+bu_text{s}" for s in (".pt", ".json"))
+    shutil.copy(pt, tmp_path / "head.pt")
+    meta = json.loads(js.read_text())
+    meta["text_encoder"] = "openai/clip-vit-base-patch32"
+    (tmp_path / "head.json").write_text(json.dumps(meta))
+    with pytest.raises(ValueError, match="text encoder"):
+        tasks.load_text_head(name=str(tmp_path / "head"))
+    with pytest.raises(ValueError, match="has classes"):
+        tasks.load_text_head("coma")
+
+
+def test_motionclip_baseline_is_deterministic():
+    model = baselines.load_baseline("motionclip", "coma+bu")
+    a = baselines.generate_from_text(model, ["disgust high smile", "sad"])
+    b = baselines.generate_from_text(model, ["disgust high smile", "sad"])
+    assert a.shape == (2, 40, 68, 3) and a.dtype == np.float32 and np.array_equal(a, b)
+    assert not np.allclose(a[0], a[1])  # the text changes the motion
+    with pytest.raises(ValueError, match="empty"):
+        baselines.generate_from_text(model, [""])
+
+
+def test_cli_text_task_writes_npz(tmp_path):
+    from facelib.__main__ import main
+    out = tmp_path / "text.npz"
+    assert main(["sample", "--task", "text", "--text", "disgust high smile", "--n", "2", "--steps", "5",
+                 "--out", str(out)]) == 0
+    npz = np.load(out)
+    assert npz["landmarks"].shape == (2, 40, 68, 3) and list(npz["texts"]) == ["disgust high smile"] * 2
+    config = json.loads(str(npz["config"]))
+    assert config["dataset"] == "coma+bu" and config["text_head"] == "guide_coma+bu_text"
+    with pytest.raises(SystemExit):
+        main(["sample", "--task", "text", "--n", "2", "--out", str(out)])
