@@ -94,21 +94,23 @@ def pool_index(level):
 
 
 @lru_cache(maxsize=None)
-def unpool_matrix(level):
-    """(V_level, V_{level+1}) bilinear interpolation from the coarser grid to level ``level``'s grid:
-    even rows/columns copy a coarse vertex, odd ones average their two (or four) coarse neighbours."""
+def unpool_weights(level):
+    """Bilinear interpolation from the coarser grid to level ``level``'s grid, as (V_level, 4) indices
+    into the coarse vertices and (V_level, 4) weights: even rows/columns copy a coarse vertex, odd
+    ones average their two (or four) coarse neighbours (unused slots have weight 0)."""
     levels = tpl.get_template().levels
     rows, cols = levels[level].shape
     coarse_cols = levels[level + 1].shape[1]
-    m = np.zeros((rows * cols, levels[level + 1].shape[0] * coarse_cols))
+    index = np.zeros((rows * cols, 4), dtype=np.int64)
+    weight = np.zeros((rows * cols, 4), dtype=np.float32)
     for r in range(rows):
         for c in range(cols):
             rs = [r // 2] if r % 2 == 0 else [r // 2, r // 2 + 1]
             cs = [c // 2] if c % 2 == 0 else [c // 2, c // 2 + 1]
-            for rr in rs:
-                for cc in cs:
-                    m[r * cols + c, rr * coarse_cols + cc] = 1.0 / (len(rs) * len(cs))
-    return m
+            sources = [rr * coarse_cols + cc for rr in rs for cc in cs]
+            index[r * cols + c, :len(sources)] = sources
+            weight[r * cols + c, :len(sources)] = 1.0 / len(sources)
+    return index, weight
 
 
 def pool(x, level):
@@ -117,5 +119,8 @@ def pool(x, level):
 
 
 def unpool(x, level):
-    """(B, V_{level+1}, C) -> (B, V_level, C): bilinear interpolation on the grid."""
-    return torch.einsum("vw,bwc->bvc", torch.as_tensor(unpool_matrix(level), dtype=x.dtype), x)
+    """(B, V_{level+1}, C) -> (B, V_level, C): bilinear interpolation on the grid (a gather of at
+    most four coarse vertices per fine vertex, not a dense matrix product)."""
+    index, weight = unpool_weights(level)
+    gathered = x[:, torch.as_tensor(index).reshape(-1)].reshape(x.shape[0], len(index), 4, x.shape[2])
+    return (gathered * torch.as_tensor(weight, dtype=x.dtype)[None, :, :, None]).sum(2)
