@@ -104,7 +104,8 @@ def _sample(args):
             "checkpoint_sha256": denoiser.meta["sha256"]}
     extra = {}
     lr = (tasks.TEXT_LR if args.task == "text" else tasks.ADAGRAD_LR) if args.lr is None else args.lr  # Alg. 1-2 settings
-    weight = guidance.GUIDANCE_WEIGHT if args.guidance_weight is None else args.guidance_weight
+    weight = ((tasks.TEXT_GUIDANCE_WEIGHT if args.task == "text" else guidance.GUIDANCE_WEIGHT)
+              if args.guidance_weight is None else args.guidance_weight)
     if args.task == "unconditional":
         landmarks = tasks.unconditional(args.n, num_frames=args.length, seed=args.seed, steps=args.steps,
                                         denoiser=denoiser)
@@ -183,7 +184,8 @@ def main(argv=None):
     p.add_argument("--label", default=None, help="expression label for --task label or geometry (e.g. high_smile)")
     p.add_argument("--text", default=None, help='--task text: what to show, e.g. "disgust high smile" or '
                    '"from the neutral face to bareteeth"')
-    p.add_argument("--guidance-weight", type=float, default=None, help="lambda of Alg. 1 (default: the paper's 0.01)")
+    p.add_argument("--guidance-weight", type=float, default=None, help="lambda of Alg. 1-2 (default: the paper's 0.01; "
+                   "0.001 for --task text, chapter 06)")
     p.add_argument("--lr", type=float, default=None, help="Adagrad learning rate of Alg. 1 (default: the book's choice)")
     p.add_argument("--order", default=None, choices=["N2E", "E2N"], help="--task geometry: neutral face first "
                    "(N2E, the default) or last (E2N)")

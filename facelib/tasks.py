@@ -29,7 +29,8 @@ GUIDANCE_METHODS = ("adagrad", "mean_shift")
 HARMONISING_PASSES = 5  # Alg. 4 line 1: "for i = 1 to 5"
 RECONSTRUCTION_SCALE = 2.0  # our choice for Alg. 4 + reconstruction guidance: the sweep of chapter 08
 TEXT_DATASET = "coma+bu"  # paper §5.2: text control works on CoMA and BU-4DFE merged (18 actions)
-TEXT_LR = 0.01  # Alg. 2's Adagrad learning rate: not in the paper; chosen by the sweep of chapter 06
+TEXT_GUIDANCE_WEIGHT = 0.001  # lambda of Alg. 2: our choice by the sweep of chapter 06 (paper: 0.01, see there)
+TEXT_LR = 0.03  # Alg. 2's Adagrad learning rate: not in the paper; chosen by the sweep of chapter 06
 
 
 @dataclass
@@ -153,7 +154,7 @@ def _guided_sample(guide, denoiser, steps, n, num_frames, seed, progress, callba
     return denoiser.normalizer.denormalize(x.detach()).numpy()
 
 
-def text_control(text, n=8, dataset=TEXT_DATASET, num_frames=40, steps=None, guidance_weight=GUIDANCE_WEIGHT,
+def text_control(text, n=8, dataset=TEXT_DATASET, num_frames=40, steps=None, guidance_weight=TEXT_GUIDANCE_WEIGHT,
                  lr=TEXT_LR, seed=0, denoiser=None, head=None, encoder=None, progress=True, callback=None):
     """Text control (Alg. 2): n sequences (n, F, 68, 3) float32 in mm that show what ``text`` says.
 
@@ -161,7 +162,9 @@ def text_control(text, n=8, dataset=TEXT_DATASET, num_frames=40, steps=None, gui
     n descriptions (one per sequence).  Each is embedded once by the offline sentence encoder
     E (facelib/text.py; empty, non-string or too long texts are refused); at every step 3 Adagrad
     steps maximise lambda log p_theta(x | x_t) + cos(BiT(x, t-1), E(c)) (Eq. 10), lambda =
-    ``guidance_weight``, rate ``lr``.  steps: None for the paper's T = 2000, or fewer (respaced).
+    ``guidance_weight`` (default 0.001, not the paper's 0.01: the cosine's gradient is small, and
+    Adagrad's steps follow the sign of the sum; chapter 06), rate ``lr``.  steps: None for the
+    paper's T = 2000, or fewer (respaced).
     """
     from .text import get_encoder
     _check_n(n)

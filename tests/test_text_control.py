@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from facelib import baselines, data, descriptions, evaluation, tasks, text
+from facelib import baselines, config, data, descriptions, evaluation, tasks, text
 from facelib.diffusion import GaussianDiffusion, linear_betas
 from facelib.guidance import OptimisationGuidance, text_score
 from facelib.models.noisy_classifier import NoisyTextHead, TextHeadConfig
@@ -117,7 +117,7 @@ def test_text_control_checks_n_and_the_head(head, denoiser):
 
 
 def test_text_head_checkpoint_checks_its_encoder_and_labels(tmp_path):
-    pt, js = (tasks.config.CHECKPOINT_DIR / f"guide_coma+bu_text{s}" for s in (".pt", ".json"))
+    pt, js = (config.CHECKPOINT_DIR / f"guide_coma+bu_text{s}" for s in (".pt", ".json"))
     shutil.copy(pt, tmp_path / "head.pt")
     meta = json.loads(js.read_text())
     meta["text_encoder"] = "openai/clip-vit-base-patch32"
@@ -125,7 +125,7 @@ def test_text_head_checkpoint_checks_its_encoder_and_labels(tmp_path):
     with pytest.raises(ValueError, match="text encoder"):
         tasks.load_text_head(name=str(tmp_path / "head"))
     with pytest.raises(ValueError, match="has classes"):
-        tasks.load_text_head("coma")
+        tasks.load_text_head("coma", name="guide_coma+bu_text")
 
 
 def test_motionclip_baseline_is_deterministic():
