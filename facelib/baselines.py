@@ -26,6 +26,7 @@ BASELINES = {
     "actor": (actor, actor.ActorTraining, actor.train_actor),
     "motionclip": (motionclip, motionclip.MotionClipTraining, motionclip.train_motionclip),
 }
+LABEL_BASELINES = ("motion3dgan", "actor")  # the rows of Table 1 (chapter 05)
 
 
 def check_baseline(name):
