@@ -34,7 +34,8 @@ def _data(args):
     return status
 
 
-TRAINABLE = ("denoiser", "guide", "text_head", "evaluator", "motion3dgan", "actor", "motionclip", "lstm_filler")
+TRAINABLE = ("denoiser", "guide", "text_head", "evaluator", "motion3dgan", "actor", "motionclip", "lstm_filler",
+             "deformer")
 TASKS = ("unconditional", "label", "text", "fill", "geometry")
 
 
@@ -63,6 +64,11 @@ def _train(args):
     elif args.name == "evaluator":
         cfg = train.EvaluatorTraining(dataset=args.dataset, classifier_type=args.type, seed=args.seed)
         pt, js = train.train_and_save_evaluator(cfg, name=args.out)
+    elif args.name == "deformer":
+        from . import deformation
+        cfg = deformation.DeformationTraining(method=args.method, split=args.split, seed=args.seed)
+        pt, js = deformation.train_and_save_deformation(replace(cfg, steps=args.steps) if args.steps else cfg,
+                                                        name=args.out)
     elif args.name == "lstm_filler":
         from . import baselines
         pt, js = baselines.train_and_save_filler(args.dataset, args.steps, args.seed, args.out)
@@ -165,15 +171,19 @@ def main(argv=None):
 
     p = sub.add_parser("train", help="train a model and save it in data/checkpoints (.pt + .json)")
     p.add_argument("name", help="what to train: " + ", ".join(TRAINABLE) + " (guide: the noisy classifier "
-                   "of Alg. 1; text_head: BiT(x_t, t) of Alg. 2, use --dataset coma+bu; evaluator: the independent LSTM classifier of §5; motion3dgan, actor: the baselines of Table 1; motionclip: the baseline of Table 2, use --dataset coma+bu)")
+                   "of Alg. 1; text_head: BiT(x_t, t) of Alg. 2, use --dataset coma+bu; evaluator: the independent LSTM classifier of §5; motion3dgan, actor: the baselines of Table 1; motionclip: the baseline of Table 2, use --dataset coma+bu; deformer: the mesh deformation of §3.3 and the "
+                   "baselines of Table 5, see --method and --split)")
     p.add_argument("--dataset", default="coma", choices=list(data.DATASET_NAMES))
     p.add_argument("--type", default="I", choices=list(data.CLASSIFIER_TYPES), help="classifier type (guide, evaluator): "
                    "I = label, S = label x N2E/E2N")
     p.add_argument("--variable-length", action="store_true", help="train on lengths 35-45 (paper App. A)")
+    p.add_argument("--method", default="ours", help="deformer: ours, no_attention, s2d, coma or linear (Table 5 rows)")
+    p.add_argument("--split", default="identity", help="deformer: identity (3 subjects held out) or expression "
+                   "(3 expressions held out), as §6")
     p.add_argument("--steps", type=int, default=None, help="training steps (default: the shipped recipe)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", default=None, help="checkpoint name or path stem (default: denoiser_<dataset>[_var], "
-                   "guide_<dataset>_<type>, ic_<dataset>_<type>)")
+                   "guide_<dataset>_<type>, ic_<dataset>_<type>, deform_<method>_<split>)")
     p.set_defaults(func=_train)
 
     p = sub.add_parser("sample", help="generate landmark sequences and write them to an .npz")

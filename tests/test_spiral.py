@@ -46,6 +46,16 @@ def test_spiral_conv_is_gather_reshape_linear():
         conv(torch.randn(2, 81, 3))
 
 
+def test_spiral_conv_projects_before_gathering_when_it_narrows():
+    # out < in takes the "project, then gather" path: it must be the same gather-reshape-Linear sum
+    s = spiral.template_spirals(1, 9)
+    conv = spiral.SpiralConv(16, 3, s)
+    x = torch.randn(2, len(s), 16, dtype=torch.float64)
+    conv = conv.double()
+    manual = conv.layer(x[:, torch.as_tensor(s).reshape(-1)].reshape(2, len(s), -1))
+    torch.testing.assert_close(conv(x), manual)
+
+
 def test_pool_then_unpool_reproduces_linear_functions_on_the_grid():
     t = tpl.get_template()
     for level in range(tpl.NUM_LEVELS - 1):

@@ -53,12 +53,14 @@ class Deformer(nn.Module):
         levels = _levels_of_layers()
         d = c.channels[-1]
         self.num_coarse = len(tpl.get_template().levels[3].vertex_index)
-        ins = (3,) + tuple(c.channels[:-1])
-        self.encoder = nn.ModuleList(spiral.SpiralConv(i, o, spiral.template_spirals(lv, c.spiral_length))
-                                     for i, o, lv in zip(ins, c.channels, levels))
-        self.query = nn.Linear(c.num_landmarks * 3, d)
-        self.to_z_id = nn.Linear(d, c.num_landmarks * 3)
-        self.identity_weight = nn.Parameter(torch.zeros(()))  # lambda_theta
+        if c.identity:  # S2D (identity=False) has no encoder: it reads Delta L only
+            ins = (3,) + tuple(c.channels[:-1])
+            self.encoder = nn.ModuleList(spiral.SpiralConv(i, o, spiral.template_spirals(lv, c.spiral_length))
+                                         for i, o, lv in zip(ins, c.channels, levels))
+            if c.attention:
+                self.query = nn.Linear(c.num_landmarks * 3, d)
+            self.to_z_id = nn.Linear(d, c.num_landmarks * 3)
+            self.identity_weight = nn.Parameter(torch.zeros(()))  # lambda_theta
         self.from_z = nn.Linear(c.num_landmarks * 3, self.num_coarse * d)
         outs = tuple(reversed(c.channels[:-1])) + (3,)
         self.decoder = nn.ModuleList(spiral.SpiralConv(i, o, spiral.template_spirals(lv, c.spiral_length))

@@ -1,0 +1,249 @@
+"""Landmark-guided mesh deformation as a task (paper §3.3, §6, Table 5; chapters 09 and 10).
+
+Training pairs come from the synthetic CoMA-like world, where every landmark sequence has its
+ground-truth meshes: for sequence i and frame f, the input is the subject's neutral mesh M and
+Delta L_f = L_f - L (the *captured* landmarks, with their noise, minus the neutral ones) and the
+target is Delta M_f = M_f - M.
+
+The two splits of §6 ("either 3 expressions or 3 subjects have been excluded from the training
+set"):
+
+* "identity": train on the training subjects, test on the 3 held-out subjects (the dataset's own
+  train/test split);
+* "expression": train on the training subjects without :data:`HELD_OUT_EXPRESSIONS`, test on
+  those 3 expressions of the same subjects (the paper does not name its three; ours are one
+  smile, one jaw opening and one asymmetric motion, each with relatives left in training).
+
+Methods (Table 5 rows): "ours", "no_attention" (ours with F_e averaged instead of attended),
+"s2d" (the decoder alone, from Delta L_f), "coma" (Chebyshev convolutions with pooling, its decoder
+fed [code of M, Delta L_f]) and "linear" (Casas & Otaduy-style dense autoencoder, likewise).
+Checkpoints are ``deform_<method>_<split>``; :func:`deform` uses ``deform_ours_identity``.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, replace
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from . import data
+from .checkpoints import load_checkpoint, save_checkpoint
+from .face import template as tpl
+from .models import coma, deformer, linear_deformer
+from .training_log import TrainingLog
+
+DATASET = "coma"  # §6: the deformation experiments use CoMA
+HELD_OUT_EXPRESSIONS = ("high_smile", "mouth_open", "mouth_side")  # our choice (the paper does not say)
+SPLITS = ("identity", "expression")
+METHODS = {  # Table 5 row -> (model module, model config)
+    "ours": (deformer, deformer.DeformerConfig()),
+    "no_attention": (deformer, deformer.DeformerConfig(attention=False)),
+    "s2d": (deformer, deformer.DeformerConfig(identity=False)),
+    "coma": (coma, coma.ComaDeformerConfig()),
+    "linear": (linear_deformer, linear_deformer.LinearDeformerConfig()),
+}
+METHOD_NAMES = {"ours": "Ours", "no_attention": "Ours (w/o attention)", "s2d": "S2D", "coma": "CoMA",
+                "linear": "Linear"}
+
+
+def check_split(split):
+    if split not in SPLITS:
+        raise ValueError(f"unknown split {split!r}; allowed: {', '.join(SPLITS)}")
+    return split
+
+
+def check_method(method):
+    if method not in METHODS:
+        raise ValueError(f"unknown method {method!r}; allowed: {', '.join(METHODS)}")
+    return method
+
+
+def split_datasets(split):
+    """(train, test) FaceDatasets of a split of §6 (see the module docstring)."""
+    check_split(split)
+    train = data.load_dataset(DATASET, "train")
+    if split == "identity":
+        return train, data.load_dataset(DATASET, "test")
+    return data.expression_split(train, HELD_OUT_EXPRESSIONS)
+
+
+@dataclass
+class Pairs:
+    """Deformation examples: K frames of each of n sequences, all in mm (float32)."""
+
+    neutral: np.ndarray  # (n, V, 3) the subject's neutral mesh M
+    delta_landmarks: np.ndarray  # (n, K, 68, 3) Delta L_f
+    delta_mesh: np.ndarray  # (n, K, V, 3) Delta M_f, the target
+    frames: np.ndarray  # (n, K) which frames of the sequence
+    labels: np.ndarray  # (n,)
+
+    def __len__(self):
+        return len(self.neutral)
+
+
+def make_pairs(dataset, frames_per_sequence=10, seed=None):
+    """Pairs of every sequence of ``dataset``: ``frames_per_sequence`` frames, evenly spaced when
+    ``seed`` is None (evaluation), else drawn at random without replacement (training)."""
+    rng = None if seed is None else np.random.default_rng(seed)
+    delta_l = dataset.delta_landmarks()
+    neutral, dl, dm, frames = [], [], [], []
+    for i in range(len(dataset)):
+        length = int(dataset.lengths[i])
+        k = min(frames_per_sequence, length)
+        f = (np.linspace(0, length - 1, k).round().astype(int) if rng is None
+             else np.sort(rng.choice(length, k, replace=False)))
+        face = dataset.face(int(dataset.subjects[i]))
+        m = face.neutral.astype(np.float32)
+        neutral.append(m)
+        dl.append(delta_l[i, f])
+        dm.append(face.expression(dataset.au_weights[i, f].astype(np.float64)).astype(np.float32) - m)
+        frames.append(f)
+    return Pairs(np.stack(neutral), np.stack(dl), np.stack(dm), np.stack(frames), dataset.labels.copy())
+
+
+def build_model(method):
+    """A freshly initialised network of a Table 5 method."""
+    module, model_config = METHODS[check_method(method)]
+    return module.build(asdict(model_config))
+
+
+@dataclass(frozen=True)
+class DeformationTraining:
+    """How the deformation networks are trained (S2D: Adam, lr 1e-3, batch 16; the rest our choice)."""
+
+    method: str = "ours"
+    split: str = "identity"
+    steps: int = 3000  # our choice: about 10 minutes on 2 cores for the spiral networks
+    sequences_per_batch: int = 4
+    frames_per_batch: int = 4  # frames of each sequence in a batch: 16 meshes per step, S2D's batch
+    frames_per_sequence: int = 10  # frames kept per training sequence
+    lr: float = 1e-3  # S2D
+    final_lr_fraction: float = 0.1  # cosine decay to lr x this (our choice)
+    max_sequences: int | None = None  # fast mode: a subset of the training sequences
+    seed: int = 0
+
+
+def fast_training(cfg):
+    """The fast-mode version of a training config (tests and FACELIB_FAST chapters)."""
+    return replace(cfg, steps=20, max_sequences=16, frames_per_sequence=4)
+
+
+def loss_weights():
+    """S2D's per-vertex weights on the template (models/deformer.landmark_weights)."""
+    t = tpl.get_template()
+    return torch.as_tensor(deformer.landmark_weights(t.vertices, t.landmark_index))
+
+
+def train_deformation(cfg=DeformationTraining(), progress=True, log_every=50):
+    """Train one method on one split; returns (model, history)."""
+    check_method(cfg.method)
+    train, _ = split_datasets(cfg.split)
+    if cfg.max_sequences:
+        train = train.subset(np.random.default_rng(cfg.seed).permutation(len(train))[:cfg.max_sequences])
+    pairs = make_pairs(train, cfg.frames_per_sequence, seed=cfg.seed)
+    neutral, dl, dm = (torch.as_tensor(a) for a in (pairs.neutral, pairs.delta_landmarks, pairs.delta_mesh))
+    weights = loss_weights()
+    torch.manual_seed(cfg.seed)
+    model = build_model(cfg.method)
+    opt = torch.optim.Adam(model.parameters(), lr=cfg.lr)
+    gen = torch.Generator().manual_seed(cfg.seed)
+    log = TrainingLog(cfg.steps, log_every, "loss", "error_mm")
+    model.train()
+    k = pairs.delta_mesh.shape[1]
+    for step in tqdm(range(cfg.steps), desc=f"train deformer ({cfg.method}, {cfg.split} split)", disable=not progress):
+        decay = 0.5 * (1 + math.cos(math.pi * step / max(cfg.steps - 1, 1)))
+        for g in opt.param_groups:
+            g["lr"] = cfg.lr * (cfg.final_lr_fraction + (1 - cfg.final_lr_fraction) * decay)
+        seq = torch.randint(0, len(pairs), (cfg.sequences_per_batch,), generator=gen)
+        frame = torch.stack([torch.randperm(k, generator=gen)[:cfg.frames_per_batch] for _ in seq])
+        target = dm[seq[:, None], frame]
+        predicted = model(neutral[seq], dl[seq[:, None], frame])
+        loss = deformer.deformation_loss(predicted, target, weights)
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        opt.step()
+        log.add(step, loss=loss.item(), error_mm=(predicted - target).norm(dim=-1).mean().item())
+    return model.eval(), log.history
+
+
+def checkpoint_name(method, split):
+    return f"deform_{check_method(method)}_{check_split(split)}"
+
+
+def train_and_save_deformation(cfg=DeformationTraining(), name=None, progress=True):
+    """Train and save as deform_<method>_<split> in data/checkpoints."""
+    model, history = train_deformation(cfg, progress=progress)
+    module = METHODS[cfg.method][0]
+    return save_checkpoint(name or checkpoint_name(cfg.method, cfg.split), model, "deformer",
+                           module.config_dict(model), method=cfg.method, split=cfg.split,
+                           held_out_expressions=list(HELD_OUT_EXPRESSIONS), training=asdict(cfg),
+                           history=history, torch_version=torch.__version__)
+
+
+def load_deformer(method="ours", split="identity", checkpoint=None):
+    """Load a shipped deformation network (sha256 checked); ``model.meta`` holds its metadata."""
+    name = checkpoint or checkpoint_name(method, split)
+    module = METHODS[check_method(method)][0]
+    model, meta = load_checkpoint(name, "deformer", module.build)
+    if meta.get("method") != method:
+        raise ValueError(f"checkpoint {name} holds method {meta.get('method')!r}, not {method!r}")
+    model.meta = meta
+    return model
+
+
+def predict(model, pairs, batch_sequences=8):
+    """Delta M (n, K, V, 3) predicted for every pair, without gradients."""
+    out = []
+    with torch.no_grad():
+        for s in range(0, len(pairs), batch_sequences):
+            sl = slice(s, s + batch_sequences)
+            out.append(model(torch.as_tensor(pairs.neutral[sl]), torch.as_tensor(pairs.delta_landmarks[sl])).numpy())
+    return np.concatenate(out)
+
+
+def evaluate(model, pairs, batch_sequences=8):
+    """Per-vertex Euclidean error of a model on pairs (Table 5's measure), in mm: a dict with the
+    mean and std over every (sequence, frame, vertex), the mean per vertex (V,) and per label."""
+    errors = np.linalg.norm(predict(model, pairs, batch_sequences) - pairs.delta_mesh, axis=-1)  # (n, K, V)
+    per_label = {int(y): float(errors[pairs.labels == y].mean()) for y in np.unique(pairs.labels)}
+    return {"mean": float(errors.mean()), "std": float(errors.std()), "per_vertex": errors.mean((0, 1)),
+            "per_label": per_label, "errors": errors}
+
+
+def check_neutral_mesh(vertices):
+    """A neutral mesh of the template topology as float32 (V, 3), or a clear error."""
+    v = np.asarray(vertices)
+    expected = tpl.get_template().num_vertices
+    if v.ndim != 2 or v.shape[1] != 3:
+        raise ValueError(f"a neutral mesh must be (V, 3) vertices, got shape {v.shape}")
+    if v.shape[0] != expected:
+        raise ValueError(f"the neutral mesh has {v.shape[0]} vertices; the template topology has {expected} "
+                         f"(meshes of another topology must first be registered to the template)")
+    if not np.all(np.isfinite(v)):
+        raise ValueError(f"the neutral mesh has {int((~np.isfinite(v)).any(1).sum())} non-finite vertices")
+    return v.astype(np.float32)
+
+
+def check_landmark_sequence(landmarks):
+    """A landmark sequence as float32 (F, 68, 3) in mm, or a clear error."""
+    x = np.asarray(landmarks)
+    if x.ndim != 3 or x.shape[1:] != (68, 3) or x.shape[0] < 1:
+        raise ValueError(f"a landmark sequence must be (F, 68, 3) in mm, got shape {x.shape}")
+    if not np.all(np.isfinite(x)):
+        raise ValueError("the landmark sequence contains NaN or infinite values")
+    return x.astype(np.float32)
+
+
+def deform(neutral_vertices, landmark_sequence, model=None):
+    """Animate a neutral mesh (V, 3) of the template topology with a landmark sequence (F, 68, 3),
+    both in mm: Delta L_f = L_f - L with L the neutral mesh's own landmarks, M_f = M + Delta M_f.
+    Returns the meshes (F, V, 3) float32 in mm."""
+    neutral = check_neutral_mesh(neutral_vertices)
+    landmarks = check_landmark_sequence(landmark_sequence)
+    model = model or load_deformer()
+    delta = landmarks - neutral[tpl.get_template().landmark_index]
+    with torch.no_grad():
+        dm = model(torch.as_tensor(neutral)[None], torch.as_tensor(delta)[None])[0].numpy()
+    return neutral[None] + dm

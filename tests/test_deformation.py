@@ -1,0 +1,126 @@
+"""Landmark-guided mesh deformation (§3.3, §6): the networks, the data pairs, the splits, training,
+the per-vertex error and ``deform``."""
+import numpy as np
+import pytest
+import torch
+
+from facelib import deformation
+from facelib.face import template as tpl
+from facelib.models import coma, deformer
+
+V = tpl.get_template().num_vertices
+
+
+@pytest.fixture(scope="module")
+def test_pairs():
+    _, test = deformation.split_datasets("identity")
+    return deformation.make_pairs(test.subset(np.arange(0, len(test), 40)), frames_per_sequence=5)
+
+
+@pytest.mark.parametrize("method", list(deformation.METHODS))
+def test_every_method_maps_a_mesh_and_landmark_motion_to_displacements(method):
+    torch.manual_seed(0)
+    model = deformation.build_model(method)
+    neutral = model.template[None] + torch.randn(2, V, 3)
+    out = model(neutral, torch.randn(2, 3, 68, 3))
+    assert out.shape == (2, 3, V, 3) and torch.isfinite(out).all()
+
+
+def test_identity_enters_only_through_lambda_theta():
+    # z = lambda_theta z_id + Delta L with lambda_theta = 0 at initialisation: the network starts as S2D
+    torch.manual_seed(0)
+    model = deformation.build_model("ours").eval()
+    delta = torch.randn(1, 2, 68, 3)
+    a, b = (model.template[None] + 3 * torch.randn(1, V, 3) for _ in range(2))
+    with torch.no_grad():
+        torch.testing.assert_close(model(a, delta), model(b, delta))
+        model.identity_weight.fill_(1.0)
+        assert (model(a, delta) - model(b, delta)).abs().max() > 1e-4
+
+
+def test_cross_attention_weights_are_a_distribution_over_coarse_vertices():
+    torch.manual_seed(0)
+    model = deformation.build_model("ours")
+    features = model.encode(model.template[None].expand(2, -1, -1))
+    attended, weights = model.attend(features, torch.randn(2, 5, 68, 3))
+    assert weights.shape == (2, 5, 80) and attended.shape == (2, 5, features.shape[-1])
+    torch.testing.assert_close(weights.sum(-1), torch.ones(2, 5))
+
+
+def test_chebyshev_layer_is_the_polynomial_filter():
+    torch.manual_seed(0)
+    conv = coma.ChebConv(2, 3, level=3, order=4).double()
+    lap = coma.scaled_laplacian(3).to_dense().double()
+    x = torch.randn(1, len(lap), 2, dtype=torch.float64)
+    t = [x[0], lap @ x[0]]
+    for _ in range(2):
+        t.append(2 * lap @ t[-1] - t[-2])
+    theta = conv.layer.weight.reshape(3, 2, 4)  # (out, in, k): inputs are stacked as (channel, order)
+    manual = sum(t[k] @ theta[:, :, k].T for k in range(4)) + conv.layer.bias
+    torch.testing.assert_close(conv(x)[0], manual)
+    eig = torch.linalg.eigvalsh(lap)
+    assert eig.min() >= -1 - 1e-6 and eig.max() <= 1 + 1e-6  # the scaled Laplacian's spectrum lies in [-1, 1]
+
+
+def test_loss_weights_keep_every_vertex_and_peak_at_the_landmarks():
+    w = deformation.loss_weights().numpy()
+    assert w.shape == (V,) and w.min() > 0 and w.max() == pytest.approx(1.0)
+    np.testing.assert_allclose(w[tpl.get_template().landmark_index], 1.0)
+    target = torch.randn(1, 2, V, 3)
+    assert deformer.deformation_loss(target, target, torch.as_tensor(w)) == 0
+    assert deformer.deformation_loss(target + 0.1, target, torch.as_tensor(w)) > 0
+
+
+def test_pairs_are_consistent_with_the_landmarks(test_pairs):
+    p = test_pairs
+    assert p.delta_mesh.shape[1:] == (5, V, 3) and p.delta_landmarks.shape[1:] == (5, 68, 3)
+    np.testing.assert_array_equal(p.frames[0], [0, 10, 20, 29, 39])  # evenly spaced for evaluation
+    # the mesh displacement at the landmark vertices is Delta L up to the 0.2 mm capture noise
+    at_landmarks = p.delta_mesh[:, :, tpl.get_template().landmark_index]
+    residual = at_landmarks - p.delta_landmarks
+    assert residual.std() == pytest.approx(0.2, abs=0.02) and abs(residual.mean()) < 0.01
+    assert np.abs(p.delta_mesh).max() > 3  # something moves by millimetres
+
+
+def test_splits_hold_out_subjects_or_expressions():
+    train, test = deformation.split_datasets("identity")
+    assert not set(train.subjects) & set(test.subjects) and len(set(test.subjects)) == 3
+    train, test = deformation.split_datasets("expression")
+    held = {train.label_names.index(y) for y in deformation.HELD_OUT_EXPRESSIONS}
+    assert set(test.labels) == held and not held & set(train.labels)
+    assert set(test.subjects) <= set(train.subjects)
+    with pytest.raises(ValueError, match="unknown split 'subject'; allowed: identity, expression"):
+        deformation.split_datasets("subject")
+
+
+def test_short_training_learns_and_is_deterministic(test_pairs):
+    cfg = deformation.fast_training(deformation.DeformationTraining(method="ours"))
+    model, history = deformation.train_deformation(cfg, progress=False, log_every=5)
+    _, again = deformation.train_deformation(cfg, progress=False, log_every=5)
+    assert history["loss"] == again["loss"]
+    assert history["loss"][-1] < 0.8 * history["loss"][0]
+    result = deformation.evaluate(model, test_pairs)
+    assert result["per_vertex"].shape == (V,) and 0 < result["mean"] and result["std"] > 0
+    with pytest.raises(ValueError, match="unknown method 'flame'; allowed: ours, no_attention, s2d, coma, linear"):
+        deformation.train_deformation(deformation.DeformationTraining(method="flame"))
+
+
+def test_deform_checks_its_inputs_and_returns_meshes():
+    torch.manual_seed(0)
+    model = deformation.build_model("s2d").eval()
+    neutral = tpl.get_template().vertices
+    landmarks = np.repeat(neutral[tpl.get_template().landmark_index][None], 4, 0)
+    meshes = deformation.deform(neutral, landmarks, model=model)
+    assert meshes.shape == (4, V, 3) and meshes.dtype == np.float32
+    with pytest.raises(ValueError, match=f"has 100 vertices; the template topology has {V}"):
+        deformation.deform(neutral[:100], landmarks, model=model)
+    bad = neutral.copy()
+    bad[5] = np.nan
+    with pytest.raises(ValueError, match="1 non-finite vertices"):
+        deformation.deform(bad, landmarks, model=model)
+    with pytest.raises(ValueError, match=r"must be \(F, 68, 3\)"):
+        deformation.deform(neutral, landmarks[:, :60], model=model)
+    nan_landmarks = landmarks.copy()
+    nan_landmarks[0, 0, 0] = np.nan
+    with pytest.raises(ValueError, match="NaN"):
+        deformation.deform(neutral, nan_landmarks, model=model)
