@@ -1,4 +1,4 @@
-"""Command line of the book: ``python -m facelib {data,train,sample}`` (see ``--help`` of each)."""
+"""Command line of the book: ``python -m facelib {data,train,sample,neutral,animate}`` (see ``--help`` of each)."""
 from __future__ import annotations
 
 import argparse
@@ -158,6 +158,45 @@ def _sample(args):
     return 0
 
 
+def _neutral(args):
+    from .face import Face, sample_identity
+    from .io import write_obj
+    if args.out is None or not str(args.out).lower().endswith(".obj"):
+        raise ValueError(f"--out must name an .obj file, got {args.out!r}")
+    write_obj(args.out, Face(sample_identity(args.seed)).neutral)
+    print(f"wrote {args.out}: the neutral face of identity seed {args.seed} (template topology, mm)")
+    return 0
+
+
+def _animate(args):
+    import io as bytes_io
+
+    import numpy as np
+
+    from . import deformation, io, viz
+    t0 = time.perf_counter()
+    neutral = io.read_neutral_mesh(args.mesh)
+    seconds = {"read mesh": time.perf_counter() - t0}
+    steps = args.steps or deformation.ANIMATE_STEPS
+    meshes, landmarks, stages = deformation.animate(neutral, args.label, order=args.order, steps=steps,
+                                                    seed=args.seed, progress=True)
+    seconds.update(stages)
+    t0 = time.perf_counter()
+    frames = [np.concatenate(pair, axis=1) for pair in zip(viz.mesh_frames(meshes, view="front"),
+                                                           viz.mesh_frames(meshes, view="three_quarter"))]
+    seconds["render GIF"] = time.perf_counter() - t0
+    used = {"label": args.label, "order": args.order, "steps": steps, "seed": args.seed, "mesh": str(args.mesh)}
+    npz = bytes_io.BytesIO()
+    np.savez(npz, landmarks=landmarks[None].astype(np.float32), config=json.dumps(used))
+    t0 = time.perf_counter()
+    written = io.write_animation(args.out, meshes, frames, fps=12, extra={"landmarks.npz": npz.getvalue()})
+    seconds["write files"] = time.perf_counter() - t0
+    print(f"wrote {len(written)} files to {args.out}: {len(meshes)} OBJ frames, animation.gif, landmarks.npz")
+    print("\n".join(f"  {k:<12} {v:7.2f} s" for k, v in seconds.items()))
+    print(f"  {'total':<12} {sum(seconds.values()):7.2f} s")
+    return 0
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(prog="python -m facelib", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -215,6 +254,22 @@ def main(argv=None):
     p.add_argument("--checkpoint", default=None, help="denoiser checkpoint (default: denoiser_<dataset>)")
     p.add_argument("--out", required=True, help="output .npz (key 'landmarks': (n, F, 68, 3) float32 in mm)")
     p.set_defaults(func=_sample)
+
+    p = sub.add_parser("neutral", help="write the neutral mesh of a new synthetic identity as OBJ (template topology)")
+    p.add_argument("--seed", type=int, default=0, help="identity seed")
+    p.add_argument("--out", required=True, help="output .obj")
+    p.set_defaults(func=_neutral)
+
+    p = sub.add_parser("animate", help="animate a neutral mesh: landmarks, geometry-adaptive generation (Alg. 4), "
+                       "deformation (§3.3); writes an OBJ per frame, animation.gif and landmarks.npz")
+    p.add_argument("--mesh", required=True, help="neutral mesh (.obj, ...) with the template topology")
+    p.add_argument("--label", required=True, help="expression label of the CoMA-like set, e.g. high_smile")
+    p.add_argument("--order", default="N2E", choices=["N2E", "E2N"], help="neutral face first (N2E) or last (E2N)")
+    p.add_argument("--steps", type=int, default=None, help="reverse steps per pass of Alg. 4 (default: "
+                   "facelib.deformation.ANIMATE_STEPS, the book's respaced chain)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", required=True, help="output folder (written all at once, or not at all)")
+    p.set_defaults(func=_animate)
     args = parser.parse_args(argv)
     try:
         return args.func(args)

@@ -182,14 +182,19 @@ def plot_landmarks(landmarks, ax=None, color="C0", label=None, numbers=False, vi
     return ax
 
 
-def gif_html(frames, fps=12, width=None):
-    """Encode RGB frames (list of (H, W, 3) uint8) as a looping GIF inside an HTML <img> tag."""
+def gif_bytes(frames, fps=12):
+    """Encode RGB frames (list of (H, W, 3) uint8) as a looping GIF file's bytes."""
     from PIL import Image
     images = [Image.fromarray(np.asarray(f)) for f in frames]
     buf = io.BytesIO()
     images[0].save(buf, format="GIF", save_all=True, append_images=images[1:], loop=0,
                    duration=int(1000 / fps), optimize=True)
-    data = base64.b64encode(buf.getvalue()).decode()
+    return buf.getvalue()
+
+
+def gif_html(frames, fps=12, width=None):
+    """Encode RGB frames (list of (H, W, 3) uint8) as a looping GIF inside an HTML <img> tag."""
+    data = base64.b64encode(gif_bytes(frames, fps)).decode()
     style = f' width="{width}"' if width else ""
     return f'<img src="data:image/gif;base64,{data}"{style}/>'
 
@@ -207,8 +212,8 @@ def figure_frames(draw, num_frames, figsize=(4, 4), dpi=80):
     return frames
 
 
-def animate_meshes(meshes, titles=None, fps=12, size=(240, 300), view="front", width=None, **kwargs):
-    """HTML GIF of a mesh sequence (F, V, 3), or of several side by side ((S, F, V, 3))."""
+def mesh_frames(meshes, titles=None, size=(240, 300), view="front", **kwargs):
+    """RGB frames of a mesh sequence (F, V, 3), or of several side by side ((S, F, V, 3))."""
     meshes = np.asarray(meshes)
     if meshes.ndim == 3:
         meshes = meshes[None]
@@ -222,7 +227,12 @@ def animate_meshes(meshes, titles=None, fps=12, size=(240, 300), view="front", w
         renderer.close()
     if titles is not None:
         frames = [_caption(fr, titles, size[0]) for fr in frames]
-    return gif_html(frames, fps=fps, width=width)
+    return frames
+
+
+def animate_meshes(meshes, titles=None, fps=12, size=(240, 300), view="front", width=None, **kwargs):
+    """HTML GIF of a mesh sequence (F, V, 3), or of several side by side ((S, F, V, 3))."""
+    return gif_html(mesh_frames(meshes, titles, size, view, **kwargs), fps=fps, width=width)
 
 
 def _caption(frame, titles, panel_width):

@@ -7,8 +7,9 @@ Delta L_f = L_f - L (68, 3), predict the per-vertex displacement Delta M_f; M_f 
   the template after each of the first three, giving mesh features F_e (80 vertices x d).
 * Cross-attention (Eq. 11): softmax(FC(Delta L_f) F_e^T / sqrt(d)) F_e, one query per frame: which
   parts of *this* face matter for *this* motion.  A linear layer maps it to z_id (204 values).
-* z = lambda_theta z_id + Delta L_f, lambda_theta learnable (initialised at 0: the network starts as
-  S2D, which reads Delta L_f only, and learns how much identity to add).
+* z = lambda_theta z_id + Delta L_f, lambda_theta learnable.  Its initial value is not in the paper;
+  we start at 1, since at 0 the encoder receives no gradient (dz/dz_id = lambda_theta) and the
+  network stays S2D (chapter 09, exercise 1).
 * Decoder (S2D's): a linear layer to 80 x d, then five spiral layers with unpooling between
   levels, giving Delta M_f (V, 3).
 
@@ -35,6 +36,7 @@ class DeformerConfig:
     attention: bool = True
     identity: bool = True
     scale: float = 10.0  # mm per network unit (our choice: displacements are a few mm)
+    identity_init: float = 1.0  # lambda_theta at initialisation (not in the paper; at 0 the encoder gets no gradient)
 
 
 def _levels_of_layers():
@@ -60,7 +62,7 @@ class Deformer(nn.Module):
             if c.attention:
                 self.query = nn.Linear(c.num_landmarks * 3, d)
             self.to_z_id = nn.Linear(d, c.num_landmarks * 3)
-            self.identity_weight = nn.Parameter(torch.zeros(()))  # lambda_theta
+            self.identity_weight = nn.Parameter(torch.tensor(float(c.identity_init)))  # lambda_theta
         self.from_z = nn.Linear(c.num_landmarks * 3, self.num_coarse * d)
         outs = tuple(reversed(c.channels[:-1])) + (3,)
         self.decoder = nn.ModuleList(spiral.SpiralConv(i, o, spiral.template_spirals(lv, c.spiral_length))
