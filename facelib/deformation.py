@@ -21,6 +21,7 @@ Checkpoints are ``deform_<method>_<split>``; :func:`deform` uses ``deform_ours_i
 """
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import asdict, dataclass, replace
 
@@ -29,7 +30,7 @@ import torch
 from tqdm import tqdm
 
 from . import data
-from .checkpoints import load_checkpoint, save_checkpoint
+from .checkpoints import checkpoint_paths, load_checkpoint, save_checkpoint
 from .face import template as tpl
 from .models import coma, deformer, linear_deformer
 from .training_log import TrainingLog
@@ -186,9 +187,11 @@ def load_deformer(method="ours", split="identity", checkpoint=None):
     """Load a shipped deformation network (sha256 checked); ``model.meta`` holds its metadata."""
     name = checkpoint or checkpoint_name(method, split)
     module = METHODS[check_method(method)][0]
+    _, js = checkpoint_paths(name)
+    held = json.loads(js.read_text()).get("method") if js.exists() else method  # (missing: load_checkpoint says so)
+    if held != method:  # before building: another method's config may not even build
+        raise ValueError(f"checkpoint {name} holds method {held!r}, not {method!r}")
     model, meta = load_checkpoint(name, "deformer", module.build)
-    if meta.get("method") != method:
-        raise ValueError(f"checkpoint {name} holds method {meta.get('method')!r}, not {method!r}")
     model.meta = meta
     return model
 

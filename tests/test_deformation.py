@@ -124,3 +124,20 @@ def test_deform_checks_its_inputs_and_returns_meshes():
     nan_landmarks[0, 0, 0] = np.nan
     with pytest.raises(ValueError, match="NaN"):
         deformation.deform(neutral, nan_landmarks, model=model)
+
+
+@pytest.mark.parametrize("split", deformation.SPLITS)
+def test_shipped_deformers_load_and_predict_far_better_than_no_motion(split):
+    _, test = deformation.split_datasets(split)
+    pairs = deformation.make_pairs(test.subset(np.arange(0, len(test), 25)), frames_per_sequence=4)
+    no_motion = np.linalg.norm(pairs.delta_mesh, axis=-1).mean()
+    for method in deformation.METHODS:
+        model = deformation.load_deformer(method, split)
+        assert model.meta["split"] == split and model.meta["method"] == method
+        assert deformation.evaluate(model, pairs)["mean"] < 0.6 * no_motion, method
+
+
+def test_a_checkpoint_of_another_method_is_refused():
+    for other in ("s2d", "linear"):  # the same network class, and another one
+        with pytest.raises(ValueError, match=f"holds method 'ours', not '{other}'"):
+            deformation.load_deformer(other, checkpoint="deform_ours_identity")

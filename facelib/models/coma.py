@@ -65,6 +65,9 @@ class ComaDeformerConfig:
     num_landmarks: int = 68
     scale: float = 10.0  # mm per network unit, as the Deformer
 
+    def __post_init__(self):
+        object.__setattr__(self, "channels", tuple(self.channels))  # JSON gives a list
+
 
 class ComaDeformer(nn.Module):
     """Encoder: Chebyshev layer + pooling per level, a linear layer to the code of M.  Decoder: a
@@ -107,12 +110,8 @@ class ComaDeformer(nn.Module):
 
 
 def config_dict(model):
-    d = asdict(model.config)
-    d["channels"] = list(d["channels"])
-    return d
+    return asdict(model.config)
 
 
 def build(config):
-    config = dict(config)
-    config["channels"] = tuple(config["channels"])
     return ComaDeformer(ComaDeformerConfig(**config))

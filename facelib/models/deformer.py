@@ -38,6 +38,9 @@ class DeformerConfig:
     scale: float = 10.0  # mm per network unit (our choice: displacements are a few mm)
     identity_init: float = 1.0  # lambda_theta at initialisation (not in the paper; at 0 the encoder gets no gradient)
 
+    def __post_init__(self):
+        object.__setattr__(self, "channels", tuple(self.channels))  # JSON gives a list
+
 
 def _levels_of_layers():
     """Resolution level of each of the five encoder layers: 0, 1, 2, 3, 3."""
@@ -128,12 +131,8 @@ def deformation_loss(predicted, target, weights, displacement_weight=0.1):
 
 
 def config_dict(model):
-    d = asdict(model.config)
-    d["channels"] = list(d["channels"])
-    return d
+    return asdict(model.config)
 
 
 def build(config):
-    config = dict(config)
-    config["channels"] = tuple(config["channels"])
     return Deformer(DeformerConfig(**config))
