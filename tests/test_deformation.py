@@ -112,6 +112,8 @@ def test_deform_checks_its_inputs_and_returns_meshes():
     landmarks = np.repeat(neutral[tpl.get_template().landmark_index][None], 4, 0)
     meshes = deformation.deform(neutral, landmarks, model=model)
     assert meshes.shape == (4, V, 3) and meshes.dtype == np.float32
+    again = meshes.copy()  # the mouth-interior rows sit between the inner lips, as the world places them
+    np.testing.assert_allclose(tpl.place_mouth_band(again, tpl.get_template()), meshes, atol=1e-5)
     with pytest.raises(ValueError, match=f"has 100 vertices; the template topology has {V}"):
         deformation.deform(neutral[:100], landmarks, model=model)
     bad = neutral.copy()
