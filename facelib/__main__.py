@@ -177,7 +177,7 @@ def _animate(args):
     t0 = time.perf_counter()
     neutral = io.read_neutral_mesh(args.mesh)
     seconds = {"read mesh": time.perf_counter() - t0}
-    steps = args.steps or deformation.ANIMATE_STEPS
+    steps = deformation.ANIMATE_STEPS if args.steps is None else args.steps
     meshes, landmarks, stages = deformation.animate(neutral, args.label, order=args.order, steps=steps,
                                                     seed=args.seed, progress=True)
     seconds.update(stages)

@@ -116,7 +116,7 @@ class DeformationTraining:
 
     method: str = "ours"
     split: str = "identity"
-    steps: int = 4000  # our choice: about 8 minutes on one core for the spiral networks
+    steps: int = 4000  # our choice: 6 to 14 minutes on one core for the spiral networks (chapter 09)
     sequences_per_batch: int = 4
     frames_per_batch: int = 4  # frames of each sequence in a batch: 16 meshes per step, S2D's batch
     frames_per_sequence: int = 10  # frames kept per training sequence
