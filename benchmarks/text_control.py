@@ -32,7 +32,7 @@ def main():
     targets = np.array([ev.class_index(y) for y in labels])
     encoder.encode(texts)  # load the encoder once, outside the timings
     print(f"cores: {os.cpu_count()}, torch threads: {torch.get_num_threads()}, dataset: {DATASET}, "
-          f"n = {args.n}, Adagrad lr {tasks.TEXT_LR}, lambda 0.01")
+          f"n = {args.n}, Adagrad lr {tasks.TEXT_LR}, lambda {tasks.TEXT_GUIDANCE_WEIGHT}")
     print(f"{'method':<22}{'steps':>6}{'seconds':>10}{'ms/step':>9}{'Acc %':>8}{'FID':>8}")
     test = data.load_dataset(DATASET, "test")
     pick = np.random.default_rng(0).choice(len(test), min(args.n, len(test)), replace=False)
