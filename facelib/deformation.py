@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import json
 import math
+import time
 from dataclasses import asdict, dataclass, replace
 
 import numpy as np
@@ -263,8 +264,6 @@ def animate(neutral_vertices, label, order="N2E", steps=ANIMATE_STEPS, seed=0, m
     """End to end (chapter 10): a neutral mesh (V, 3) of the template topology -> its landmarks ->
     geometry-adaptive generation of ``label`` (Alg. 4, with the book's reconstruction guidance) ->
     deformation.  Returns (meshes (F, V, 3), landmarks (F, 68, 3), seconds per stage)."""
-    import time
-
     from . import tasks
     from .face import COMA_LABELS
     if label not in COMA_LABELS:

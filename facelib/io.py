@@ -32,9 +32,11 @@ def read_neutral_mesh(path):
     if not np.array_equal(f, t.faces):
         raise ValueError(f"{path} has the template's vertex and triangle counts but other triangles: "
                          f"its vertices are not in the template's order")
-    if not np.all(np.isfinite(v)):
-        raise ValueError(f"{path} has {int((~np.isfinite(v)).any(1).sum())} non-finite vertices")
-    return v.astype(np.float32)
+    from .deformation import check_neutral_mesh
+    try:
+        return check_neutral_mesh(v)
+    except ValueError as e:
+        raise ValueError(f"{path}: {e}") from None
 
 
 def write_obj(path, vertices, faces=None):
