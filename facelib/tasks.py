@@ -24,7 +24,13 @@ from .models.denoiser import Denoiser, DenoiserConfig
 from .models.noisy_classifier import NoisyClassifier, NoisyClassifierConfig, NoisyTextHead, TextHeadConfig
 
 DEFAULT_DENOISER = "denoiser_coma"
-ADAGRAD_LR = 0.01  # Alg. 1's Adagrad learning rate: not in the paper; chosen by the sweep of chapter 05
+# Alg. 1's Adagrad learning rate, per dataset, for a chain of LR_REFERENCE_STEPS reverse steps: not in
+# the paper; each is the pick of chapter 05's sweep (48 guided sequences per rate, 200 steps, best
+# accuracy - 2 FID).  A rate is a step length in the normalised landmark space (Adagrad's first step
+# moves every coordinate by it), so it depends on the data; see adagrad_lr for other step counts.
+ADAGRAD_LR = {"coma": 0.03, "bu": 0.1}
+LR_REFERENCE_STEPS = 200
+GEOMETRY_LR = 0.01  # the Adagrad rate of Alg. 4's type-S guidance, with which chapter 08 is measured (our choice)
 GUIDANCE_METHODS = ("adagrad", "mean_shift")
 HARMONISING_PASSES = 5  # Alg. 4 line 1: "for i = 1 to 5"
 RECONSTRUCTION_SCALE = 2.0  # our choice for Alg. 4 + reconstruction guidance: the sweep of chapter 08
@@ -118,14 +124,28 @@ def check_same_space(denoiser, guide):
         raise ValueError("guidance classifier and denoiser use different diffusion schedules")
 
 
+def adagrad_lr(dataset, steps=None, num_steps=2000):
+    """The default Adagrad rate of label control for a chain of ``steps`` reverse steps (None: T).
+
+    The guided displacements of successive steps point in different directions (fresh noise in
+    between), so they add up like a random walk, as the square root of the number of steps: the rate
+    chosen at 200 steps is scaled by sqrt(200 / steps) (our choice; benchmarks/label_control.py
+    measures it at T = 2000, where the unscaled rate overshoots)."""
+    if dataset not in ADAGRAD_LR:
+        raise ValueError(f"no default Adagrad learning rate for dataset {dataset!r} (defaults for "
+                         f"{', '.join(ADAGRAD_LR)}): pass lr=")
+    return ADAGRAD_LR[dataset] * float(np.sqrt(LR_REFERENCE_STEPS / (steps or num_steps)))
+
+
 def label_control(label, n=16, dataset="coma", num_frames=40, steps=None, guidance_weight=GUIDANCE_WEIGHT,
-                  lr=ADAGRAD_LR, method="adagrad", scale=1.0, seed=0, denoiser=None, guide=None,
+                  lr=None, method="adagrad", scale=1.0, seed=0, denoiser=None, guide=None,
                   classifier_type="I", progress=True, callback=None):
     """Label control (Alg. 1): n sequences (n, F, 68, 3) float32 in mm showing ``label``.
 
     label: a label name of the dataset (e.g. "high_smile"), or a list of n names (one per sequence).
     method: "adagrad" (Alg. 1: 3 Adagrad steps on lambda log p_theta + log p_phi, lambda =
-    ``guidance_weight``, rate ``lr``) or "mean_shift" (classic classifier guidance, ``scale``).
+    ``guidance_weight``, rate ``lr``, default :func:`adagrad_lr`) or "mean_shift" (classic
+    classifier guidance, ``scale``).
     steps: None for the paper's T = 2000, or fewer (respaced).
     """
     _check_n(n)
@@ -138,6 +158,7 @@ def label_control(label, n=16, dataset="coma", num_frames=40, steps=None, guidan
     guide = guide or load_guide(dataset, classifier_type)
     targets = guide.class_indices(labels)
     score = classifier_score(guide.model, targets)
+    lr = adagrad_lr(guide.dataset, steps, guide.meta["training"]["num_diffusion_steps"]) if lr is None else lr
     make_guidance = ((lambda diffusion: OptimisationGuidance(score, diffusion, guidance_weight, lr)) if method == "adagrad"
                      else (lambda diffusion: MeanShiftGuidance(score, diffusion, scale)))
     return _guided_sample(guide, denoiser, steps, n, num_frames, seed, progress, callback, make_guidance)
@@ -241,7 +262,7 @@ def order_sensitive_label(label, order=None):
 
 def geometry_adaptive(neutral_landmarks, label, order=None, n=1, num_frames=40, passes=HARMONISING_PASSES,
                       steps=None, renoise_step=None, resample=1, reconstruction_scale=0.0,
-                      guidance_weight=GUIDANCE_WEIGHT, lr=ADAGRAD_LR, seed=0, dataset="coma", denoiser=None,
+                      guidance_weight=GUIDANCE_WEIGHT, lr=GEOMETRY_LR, seed=0, dataset="coma", denoiser=None,
                       guide=None, return_passes=False, progress=True):
     """Geometry-adaptive generation with label control (Alg. 4): n sequences of a given face.
 

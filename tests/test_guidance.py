@@ -97,6 +97,19 @@ def test_label_control_errors():
         tasks.load_guide("coma", name="guide_bu_I")
 
 
+def test_default_adagrad_rate_is_the_sweep_pick_at_200_steps_and_scales_with_sqrt_steps():
+    for dataset, lr in tasks.ADAGRAD_LR.items():
+        assert tasks.adagrad_lr(dataset, tasks.LR_REFERENCE_STEPS) == pytest.approx(lr)
+        assert tasks.adagrad_lr(dataset, None) == pytest.approx(lr * np.sqrt(tasks.LR_REFERENCE_STEPS / 2000))
+        assert tasks.adagrad_lr(dataset, 50) == pytest.approx(2 * lr)
+    with pytest.raises(ValueError, match="no default Adagrad learning rate for dataset 'coma\\+bu'.*pass lr="):
+        tasks.adagrad_lr("coma+bu", 200)
+    # label_control's default is that rate: passing it explicitly gives the same samples
+    kwargs = dict(steps=5, seed=1, progress=False)
+    assert np.array_equal(tasks.label_control("mouth_open", 2, **kwargs),
+                          tasks.label_control("mouth_open", 2, lr=tasks.adagrad_lr("coma", 5), **kwargs))
+
+
 def test_label_control_is_deterministic_and_beats_unguided_sampling():
     labels = list(evaluation.load_evaluator("coma").class_names)  # one sequence per label
     kwargs = dict(steps=50, seed=3, progress=False)
@@ -121,5 +134,6 @@ def test_cli_label_task_writes_npz(tmp_path):
     assert npz["landmarks"].shape == (2, 40, 68, 3) and npz["landmarks"].dtype == np.float32
     assert list(npz["labels"]) == ["high_smile", "high_smile"]
     assert '"guidance_weight": 0.01' in str(npz["config"])
+    assert f'"adagrad_lr": {tasks.adagrad_lr("coma", 5)}' in str(npz["config"])
     with pytest.raises(SystemExit):
         main(["sample", "--task", "label", "--label", "grin", "--n", "2", "--steps", "5", "--out", str(out)])
