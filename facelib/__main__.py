@@ -109,9 +109,9 @@ def _sample(args):
             "steps": args.steps or denoiser.diffusion.num_steps, "checkpoint": args.checkpoint or f"denoiser_{dataset}",
             "checkpoint_sha256": denoiser.meta["sha256"]}
     extra = {}
-    lr = args.lr  # None: each task's default Adagrad rate (Alg. 1, 2 and 4)
-    if lr is None and args.task in ("text", "geometry"):
-        lr = tasks.TEXT_LR if args.task == "text" else tasks.GEOMETRY_LR
+    lr = args.lr  # None: the task's default Adagrad rate (Alg. 1, 2 and 4)
+    if lr is None and args.task in ("text", "geometry", "label"):
+        lr = {"text": tasks.TEXT_LR, "geometry": tasks.GEOMETRY_LR}.get(args.task) or tasks.adagrad_lr(dataset, args.steps)
     weight = ((tasks.TEXT_GUIDANCE_WEIGHT if args.task == "text" else guidance.GUIDANCE_WEIGHT)
               if args.guidance_weight is None else args.guidance_weight)
     if args.task == "unconditional":
@@ -152,8 +152,7 @@ def _sample(args):
         landmarks = tasks.label_control(args.label, args.n, dataset=dataset, num_frames=args.length,
                                         steps=args.steps, guidance_weight=weight, lr=lr,
                                         seed=args.seed, denoiser=denoiser)
-        used.update(dataset=dataset, label=args.label, guidance_weight=weight,
-                    adagrad_lr=tasks.adagrad_lr(dataset, args.steps) if lr is None else lr,
+        used.update(dataset=dataset, label=args.label, guidance_weight=weight, adagrad_lr=lr,
                     adagrad_steps=guidance.ADAGRAD_STEPS, classifier="guide_" + dataset + "_I")
         extra["labels"] = np.array([args.label] * args.n)
     np.savez(args.out, landmarks=landmarks.astype(np.float32), config=json.dumps(used), **extra)
