@@ -1,11 +1,12 @@
 """Time text control (Alg. 2) for 64 sequences and score them; print a table.
 
-Usage: python benchmarks/text_control.py [--n 64] [--steps 2000 200 100]
+Usage: python benchmarks/text_control.py [--n 64] [--steps 2000 200 100] [--lr R]
 The n sequences cycle through the raw texts of the 18 labels of "coma+bu" (the raw-text task of
 §5.2).  For each number of reverse steps (2000 = the paper's T; fewer = respaced) it prints the
 wall time, the time per step, and the type-I IC accuracy and FID of the guided sequences (FID
 against the training split, from n sequences: compare rows with each other, not with tables
-computed from another n).  The MotionCLIP-style baseline (one decoder pass) is timed too.
+computed from another n), and the Adagrad rate used (default: tasks.text_lr, scaled with the number
+of steps; --lr fixes it).  The MotionCLIP-style baseline (one decoder pass) is timed too.
 """
 import argparse
 import os
@@ -23,6 +24,7 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--n", type=int, default=64)
     parser.add_argument("--steps", type=int, nargs="+", default=[2000, 200, 100])
+    parser.add_argument("--lr", type=float, default=None, help="Adagrad rate for every row (default: tasks.text_lr)")
     args = parser.parse_args()
     ev = evaluation.load_evaluator(DATASET, "I")
     head, denoiser = tasks.load_text_head(DATASET), tasks.load_denoiser(f"denoiser_{DATASET}")
@@ -32,8 +34,8 @@ def main():
     targets = np.array([ev.class_index(y) for y in labels])
     encoder.encode(texts)  # load the encoder once, outside the timings
     print(f"cores: {os.cpu_count()}, torch threads: {torch.get_num_threads()}, dataset: {DATASET}, "
-          f"n = {args.n}, Adagrad lr {tasks.TEXT_LR}, lambda {tasks.TEXT_GUIDANCE_WEIGHT}")
-    print(f"{'method':<22}{'steps':>6}{'seconds':>10}{'ms/step':>9}{'Acc %':>8}{'FID':>8}")
+          f"n = {args.n}, lambda {tasks.TEXT_GUIDANCE_WEIGHT}")
+    print(f"{'method':<22}{'steps':>6}{'seconds':>10}{'ms/step':>9}{'Acc %':>8}{'FID':>8}{'lr':>8}")
     test = data.load_dataset(DATASET, "test")
     pick = np.random.default_rng(0).choice(len(test), min(args.n, len(test)), replace=False)
     gt = ev.score(test.landmarks[pick], test.targets("I")[pick])
@@ -45,13 +47,14 @@ def main():
     s = ev.score(x, targets)
     print(f"{'MotionCLIP-style':<22}{'':>6}{dt:>10.2f}{'':>9}{s['accuracy']:>8.1f}{s['fid']:>8.2f}", flush=True)
     for steps in args.steps:
+        lr = tasks.text_lr(steps) if args.lr is None else args.lr
         t0 = time.perf_counter()
-        x = tasks.text_control(texts, args.n, steps=steps, seed=0, head=head, denoiser=denoiser, encoder=encoder,
-                               progress=False)
+        x = tasks.text_control(texts, args.n, steps=steps, lr=lr, seed=0, head=head, denoiser=denoiser,
+                               encoder=encoder, progress=False)
         dt = time.perf_counter() - t0
         s = ev.score(x, targets)
         print(f"{'ours (Alg. 2)':<22}{steps:>6}{dt:>10.1f}{1e3 * dt / steps:>9.1f}{s['accuracy']:>8.1f}"
-              f"{s['fid']:>8.2f}", flush=True)
+              f"{s['fid']:>8.2f}{lr:>8.3g}", flush=True)
 
 
 if __name__ == "__main__":

@@ -111,7 +111,8 @@ def _sample(args):
     extra = {}
     lr = args.lr  # None: the task's default Adagrad rate (Alg. 1, 2 and 4)
     if lr is None and args.task in ("text", "geometry", "label"):
-        lr = {"text": tasks.TEXT_LR, "geometry": tasks.GEOMETRY_LR}.get(args.task) or tasks.adagrad_lr(dataset, args.steps)
+        lr = (tasks.text_lr(args.steps) if args.task == "text" else tasks.GEOMETRY_LR if args.task == "geometry"
+              else tasks.adagrad_lr(dataset, args.steps))
     weight = ((tasks.TEXT_GUIDANCE_WEIGHT if args.task == "text" else guidance.GUIDANCE_WEIGHT)
               if args.guidance_weight is None else args.guidance_weight)
     if args.task == "unconditional":
@@ -236,8 +237,9 @@ def main(argv=None):
     p.add_argument("--text", default=None, help='--task text: what to show, e.g. "disgust high smile" or '
                    '"from the neutral face to bareteeth"')
     p.add_argument("--guidance-weight", type=float, default=None, help="lambda of Alg. 1-2 (default: the paper's 0.01; "
-                   "0.001 for --task text, chapter 06)")
-    p.add_argument("--lr", type=float, default=None, help="Adagrad learning rate of Alg. 1 (default: the book's choice)")
+                   "tasks.TEXT_GUIDANCE_WEIGHT for --task text, chapter 06)")
+    p.add_argument("--lr", type=float, default=None, help="Adagrad learning rate of Alg. 1, 2 and 4 "
+                   "(default: the book's choice for the task and the number of steps)")
     p.add_argument("--order", default=None, choices=["N2E", "E2N"], help="--task geometry: neutral face first "
                    "(N2E, the default) or last (E2N)")
     p.add_argument("--passes", type=int, default=5, help="--task geometry: harmonising passes of Alg. 4 (default 5)")

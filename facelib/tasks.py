@@ -35,8 +35,11 @@ GUIDANCE_METHODS = ("adagrad", "mean_shift")
 HARMONISING_PASSES = 5  # Alg. 4 line 1: "for i = 1 to 5"
 RECONSTRUCTION_SCALE = 2.0  # our choice for Alg. 4 + reconstruction guidance: the sweep of chapter 08
 TEXT_DATASET = "coma+bu"  # paper §5.2: text control works on CoMA and BU-4DFE merged (18 actions)
-TEXT_GUIDANCE_WEIGHT = 0.001  # lambda of Alg. 2: our choice by the sweep of chapter 06 (paper: 0.01, see there)
-TEXT_LR = 0.03  # Alg. 2's Adagrad learning rate: not in the paper; chosen by the sweep of chapter 06
+# Alg. 2's lambda (paper: 0.01) and Adagrad rate (not in the paper) for a chain of TEXT_LR_REFERENCE_STEPS
+# reverse steps: the pick of chapter 06's sweep (72 raw-text sequences, 100 steps, best accuracy - 2 FID)
+TEXT_GUIDANCE_WEIGHT = 0.0003
+TEXT_LR = 0.2
+TEXT_LR_REFERENCE_STEPS = 100
 
 
 @dataclass
@@ -124,17 +127,29 @@ def check_same_space(denoiser, guide):
         raise ValueError("guidance classifier and denoiser use different diffusion schedules")
 
 
-def adagrad_lr(dataset, steps=None, num_steps=2000):
-    """The default Adagrad rate of label control for a chain of ``steps`` reverse steps (None: T).
+def step_scaled_lr(rate, reference_steps, steps=None, num_steps=2000):
+    """An Adagrad rate chosen for a chain of ``reference_steps`` reverse steps, for a chain of ``steps``
+    (None: T = ``num_steps``): scaled by sqrt(reference_steps / steps).
 
     The guided displacements of successive steps point in different directions (fresh noise in
-    between), so they add up like a random walk, as the square root of the number of steps: the rate
-    chosen at 200 steps is scaled by sqrt(200 / steps) (our choice; benchmarks/label_control.py
-    measures it at T = 2000, where the unscaled rate overshoots)."""
+    between), so they add up like a random walk, as the square root of the number of steps (our
+    choice; benchmarks/label_control.py measures it at T = 2000, where the unscaled rate overshoots)."""
+    return rate * float(np.sqrt(reference_steps / (steps or num_steps)))
+
+
+def adagrad_lr(dataset, steps=None, num_steps=2000):
+    """The default Adagrad rate of label control (Alg. 1) for a chain of ``steps`` reverse steps
+    (None: T): ADAGRAD_LR[dataset], chosen at 200 steps, through :func:`step_scaled_lr`."""
     if dataset not in ADAGRAD_LR:
         raise ValueError(f"no default Adagrad learning rate for dataset {dataset!r} (defaults for "
                          f"{', '.join(ADAGRAD_LR)}): pass lr=")
-    return ADAGRAD_LR[dataset] * float(np.sqrt(LR_REFERENCE_STEPS / (steps or num_steps)))
+    return step_scaled_lr(ADAGRAD_LR[dataset], LR_REFERENCE_STEPS, steps, num_steps)
+
+
+def text_lr(steps=None, num_steps=2000):
+    """The default Adagrad rate of text control (Alg. 2) for a chain of ``steps`` reverse steps
+    (None: T): TEXT_LR, chosen at 100 steps, through :func:`step_scaled_lr`."""
+    return step_scaled_lr(TEXT_LR, TEXT_LR_REFERENCE_STEPS, steps, num_steps)
 
 
 def label_control(label, n=16, dataset="coma", num_frames=40, steps=None, guidance_weight=GUIDANCE_WEIGHT,
@@ -176,16 +191,16 @@ def _guided_sample(guide, denoiser, steps, n, num_frames, seed, progress, callba
 
 
 def text_control(text, n=8, dataset=TEXT_DATASET, num_frames=40, steps=None, guidance_weight=TEXT_GUIDANCE_WEIGHT,
-                 lr=TEXT_LR, seed=0, denoiser=None, head=None, encoder=None, progress=True, callback=None):
+                 lr=None, seed=0, denoiser=None, head=None, encoder=None, progress=True, callback=None):
     """Text control (Alg. 2): n sequences (n, F, 68, 3) float32 in mm that show what ``text`` says.
 
     text: a description ("disgust high smile", "from the neutral face to bareteeth"), or a list of
     n descriptions (one per sequence).  Each is embedded once by the offline sentence encoder
     E (facelib/text.py; empty, non-string or too long texts are refused); at every step 3 Adagrad
     steps maximise lambda log p_theta(x | x_t) + cos(BiT(x, t-1), E(c)) (Eq. 10), lambda =
-    ``guidance_weight`` (default 0.001, not the paper's 0.01: the cosine's gradient is small, and
-    Adagrad's steps follow the sign of the sum; chapter 06), rate ``lr``.  steps: None for the
-    paper's T = 2000, or fewer (respaced).
+    ``guidance_weight`` (default TEXT_GUIDANCE_WEIGHT, not the paper's 0.01: the cosine's gradient is
+    small, and Adagrad's steps follow the sign of the sum; chapter 06), rate ``lr`` (default
+    :func:`text_lr`).  steps: None for the paper's T = 2000, or fewer (respaced).
     """
     from .text import get_encoder
     _check_n(n)
@@ -198,6 +213,7 @@ def text_control(text, n=8, dataset=TEXT_DATASET, num_frames=40, steps=None, gui
     if head.classifier_type != "text":
         raise ValueError("text control needs a text head (load_text_head), not a label classifier")
     score = text_score(head.model, embeddings)
+    lr = text_lr(steps, head.meta["training"]["num_diffusion_steps"]) if lr is None else lr
     return _guided_sample(head, denoiser, steps, n, num_frames, seed, progress, callback,
                           lambda diffusion: OptimisationGuidance(score, diffusion, guidance_weight, lr))
 

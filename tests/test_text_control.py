@@ -97,6 +97,18 @@ def test_text_control_is_deterministic_and_follows_the_text(head, denoiser):
     assert p_guided.mean() > p_unguided.mean() + 0.2
 
 
+def test_default_text_rate_is_the_sweep_pick_at_100_steps_and_scales_with_sqrt_steps(head, denoiser):
+    assert tasks.text_lr(tasks.TEXT_LR_REFERENCE_STEPS) == pytest.approx(tasks.TEXT_LR)
+    assert tasks.text_lr(4 * tasks.TEXT_LR_REFERENCE_STEPS) == pytest.approx(tasks.TEXT_LR / 2)
+    assert tasks.text_lr(None) == pytest.approx(tasks.TEXT_LR * np.sqrt(tasks.TEXT_LR_REFERENCE_STEPS / 2000))
+    # text_control's default is that rate: passing it explicitly gives the same samples
+    kwargs = dict(steps=5, seed=1, progress=False, head=head, denoiser=denoiser)
+    assert np.array_equal(tasks.text_control("sad", 2, **kwargs),
+                          tasks.text_control("sad", 2, lr=tasks.text_lr(5), **kwargs))
+    assert not np.array_equal(tasks.text_control("sad", 2, **kwargs),
+                              tasks.text_control("sad", 2, lr=tasks.TEXT_LR, **kwargs))
+
+
 @pytest.mark.parametrize("bad, message", [("", "empty"), ("   ", "empty"), (42, "string"), (["sad", 3], "string"),
                                           ("smile " * 300, "word pieces")])
 def test_text_control_refuses_bad_text(bad, message, head, denoiser):
@@ -147,5 +159,7 @@ def test_cli_text_task_writes_npz(tmp_path):
     assert npz["landmarks"].shape == (2, 40, 68, 3) and list(npz["texts"]) == ["disgust high smile"] * 2
     config = json.loads(str(npz["config"]))
     assert config["dataset"] == "coma+bu" and config["text_head"] == "guide_coma+bu_text"
+    assert config["adagrad_lr"] == pytest.approx(tasks.text_lr(5))
+    assert config["guidance_weight"] == tasks.TEXT_GUIDANCE_WEIGHT
     with pytest.raises(SystemExit):
         main(["sample", "--task", "text", "--n", "2", "--out", str(out)])
