@@ -97,10 +97,11 @@ def test_text_control_is_deterministic_and_follows_the_text(head, denoiser):
     assert p_guided.mean() > p_unguided.mean() + 0.2
 
 
-def test_default_text_rate_is_the_sweep_pick_at_100_steps_and_scales_with_sqrt_steps(head, denoiser):
+def test_default_text_rate_is_the_sweep_pick_at_100_steps_and_scales_with_one_over_steps(head, denoiser):
     assert tasks.text_lr(tasks.TEXT_LR_REFERENCE_STEPS) == pytest.approx(tasks.TEXT_LR)
-    assert tasks.text_lr(4 * tasks.TEXT_LR_REFERENCE_STEPS) == pytest.approx(tasks.TEXT_LR / 2)
-    assert tasks.text_lr(None) == pytest.approx(tasks.TEXT_LR * np.sqrt(tasks.TEXT_LR_REFERENCE_STEPS / 2000))
+    assert tasks.text_lr(4 * tasks.TEXT_LR_REFERENCE_STEPS) == pytest.approx(tasks.TEXT_LR / 4)
+    assert tasks.text_lr(None) == pytest.approx(tasks.TEXT_LR * tasks.TEXT_LR_REFERENCE_STEPS / 2000)
+    assert tasks.step_scaled_lr(0.1, 100, 400) == pytest.approx(0.05)  # the default power 0.5 of label control
     # text_control's default is that rate: passing it explicitly gives the same samples
     kwargs = dict(steps=5, seed=1, progress=False, head=head, denoiser=denoiser)
     assert np.array_equal(tasks.text_control("sad", 2, **kwargs),
