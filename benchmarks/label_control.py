@@ -36,7 +36,7 @@ def main():
     print(f"{'GT':>6}{'':>10}{'':>9}{gt['accuracy']:>8.1f}{gt['fid']:>8.2f}   ({len(pick)} random test sequences)")
     for steps in args.steps:
         t0 = time.perf_counter()
-        lr = args.lr or tasks.adagrad_lr(args.dataset, steps)
+        lr = tasks.adagrad_lr(args.dataset, steps) if args.lr is None else args.lr
         x = tasks.label_control(labels, args.n, steps=steps, seed=0, guide=guide, denoiser=denoiser, lr=lr, progress=False)
         dt = time.perf_counter() - t0
         s = ev.score(x, targets)

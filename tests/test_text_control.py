@@ -104,10 +104,9 @@ def test_default_text_rate_is_the_sweep_pick_at_100_steps_and_scales_with_one_ov
     assert tasks.step_scaled_lr(0.1, 100, 400) == pytest.approx(0.05)  # the default power 0.5 of label control
     # text_control's default is that rate: passing it explicitly gives the same samples
     kwargs = dict(steps=5, seed=1, progress=False, head=head, denoiser=denoiser)
-    assert np.array_equal(tasks.text_control("sad", 2, **kwargs),
-                          tasks.text_control("sad", 2, lr=tasks.text_lr(5), **kwargs))
-    assert not np.array_equal(tasks.text_control("sad", 2, **kwargs),
-                              tasks.text_control("sad", 2, lr=tasks.TEXT_LR, **kwargs))
+    default = tasks.text_control("sad", 2, **kwargs)
+    assert np.array_equal(default, tasks.text_control("sad", 2, lr=tasks.text_lr(5), **kwargs))
+    assert not np.array_equal(default, tasks.text_control("sad", 2, lr=tasks.TEXT_LR, **kwargs))
 
 
 @pytest.mark.parametrize("bad, message", [("", "empty"), ("   ", "empty"), (42, "string"), (["sad", 3], "string"),
