@@ -1,14 +1,18 @@
 """Time text control (Alg. 2) for 64 sequences and score them; print a table.
 
-Usage: python benchmarks/text_control.py [--n 64] [--steps 2000 200 100] [--lr R]
+Usage: python benchmarks/text_control.py [--n 64] [--steps 2000 200 100] [--lr R] [--enriched]
+                                         [--head-input x_t x0_hat]
 The n sequences cycle through the raw texts of the 18 labels of "coma+bu" (the raw-text task of
-§5.2).  For each number of reverse steps (2000 = the paper's T; fewer = respaced) it prints the
+§5.2, type-I IC), or with --enriched through the enriched sentences of the 36 (label, order) classes
+("from the neutral face to X" / "from X to the neutral face", type-S IC).  --head-input lists what
+the text head reads (x_t: Alg. 2; x0_hat: the denoiser's estimate, chapter 06 section 8).  For each number of reverse steps (2000 = the paper's T; fewer = respaced) it prints the
 wall time, the time per step, and the type-I IC accuracy and FID of the guided sequences (FID
 against the training split, from n sequences: compare rows with each other, not with tables
 computed from another n), and the Adagrad rate used (default: tasks.text_lr, scaled with the number
 of steps; --lr fixes it).  The MotionCLIP-style baseline (one decoder pass) is timed too.
 """
 import argparse
+import itertools
 import os
 import time
 
@@ -25,35 +29,38 @@ def main():
     parser.add_argument("--n", type=int, default=64)
     parser.add_argument("--steps", type=int, nargs="+", default=[2000, 200, 100])
     parser.add_argument("--lr", type=float, default=None, help="Adagrad rate for every row (default: tasks.text_lr)")
+    parser.add_argument("--enriched", action="store_true", help="the enriched-text task (type-S IC)")
+    parser.add_argument("--head-input", nargs="+", default=["x_t"], choices=list(tasks.HEAD_INPUTS))
     args = parser.parse_args()
-    ev = evaluation.load_evaluator(DATASET, "I")
+    kind = "S" if args.enriched else "I"
+    ev = evaluation.load_evaluator(DATASET, kind)
     head, denoiser = tasks.load_text_head(DATASET), tasks.load_denoiser(f"denoiser_{DATASET}")
     encoder = text.get_encoder()
-    labels = [ev.class_names[i % len(ev.class_names)] for i in range(args.n)]
-    texts = [descriptions.raw_text(y) for y in labels]
-    targets = np.array([ev.class_index(y) for y in labels])
+    classes = [ev.class_names[i % len(ev.class_names)] for i in range(args.n)]
+    texts = [descriptions.enriched_texts(*c.split())[0] if args.enriched else descriptions.raw_text(c) for c in classes]
+    targets = np.array([ev.class_index(c) for c in classes])
     encoder.encode(texts)  # load the encoder once, outside the timings
     print(f"cores: {os.cpu_count()}, torch threads: {torch.get_num_threads()}, dataset: {DATASET}, "
-          f"n = {args.n}, lambda {tasks.TEXT_GUIDANCE_WEIGHT}")
-    print(f"{'method':<22}{'steps':>6}{'seconds':>10}{'ms/step':>9}{'Acc %':>8}{'FID':>8}{'lr':>8}")
+          f"n = {args.n}, lambda {tasks.TEXT_GUIDANCE_WEIGHT}, task {'enriched (IC S)' if args.enriched else 'raw (IC I)'}")
+    print(f"{'method':<26}{'steps':>6}{'seconds':>10}{'ms/step':>9}{'Acc %':>8}{'FID':>8}{'lr':>8}")
     test = data.load_dataset(DATASET, "test")
     pick = np.random.default_rng(0).choice(len(test), min(args.n, len(test)), replace=False)
-    gt = ev.score(test.landmarks[pick], test.targets("I")[pick])
-    print(f"{'GT (test sequences)':<22}{'':>6}{'':>10}{'':>9}{gt['accuracy']:>8.1f}{gt['fid']:>8.2f}")
+    gt = ev.score(test.landmarks[pick], test.targets(kind)[pick])
+    print(f"{'GT (test sequences)':<26}{'':>6}{'':>10}{'':>9}{gt['accuracy']:>8.1f}{gt['fid']:>8.2f}")
     model = baselines.load_baseline("motionclip", DATASET)
     t0 = time.perf_counter()
     x = baselines.generate_from_text(model, texts, encoder=encoder)
     dt = time.perf_counter() - t0
     s = ev.score(x, targets)
-    print(f"{'MotionCLIP-style':<22}{'':>6}{dt:>10.2f}{'':>9}{s['accuracy']:>8.1f}{s['fid']:>8.2f}", flush=True)
-    for steps in args.steps:
+    print(f"{'MotionCLIP-style':<26}{'':>6}{dt:>10.2f}{'':>9}{s['accuracy']:>8.1f}{s['fid']:>8.2f}", flush=True)
+    for steps, head_input in itertools.product(args.steps, args.head_input):
         lr = tasks.text_lr(steps) if args.lr is None else args.lr
         t0 = time.perf_counter()
-        x = tasks.text_control(texts, args.n, steps=steps, lr=lr, seed=0, head=head, denoiser=denoiser,
-                               encoder=encoder, progress=False)
+        x = tasks.text_control(texts, args.n, steps=steps, lr=lr, head_input=head_input, seed=0, head=head,
+                               denoiser=denoiser, encoder=encoder, progress=False)
         dt = time.perf_counter() - t0
         s = ev.score(x, targets)
-        print(f"{'ours (Alg. 2)':<22}{steps:>6}{dt:>10.1f}{1e3 * dt / steps:>9.1f}{s['accuracy']:>8.1f}"
+        print(f"{'ours, head reads ' + head_input:<26}{steps:>6}{dt:>10.1f}{1e3 * dt / steps:>9.1f}{s['accuracy']:>8.1f}"
               f"{s['fid']:>8.2f}{lr:>8.3g}", flush=True)
 
 

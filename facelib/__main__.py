@@ -120,8 +120,9 @@ def _sample(args):
                                         denoiser=denoiser)
     elif args.task == "text":
         landmarks = tasks.text_control(args.text, args.n, dataset=dataset, num_frames=args.length, steps=args.steps,
-                                       guidance_weight=weight, lr=lr, seed=args.seed, denoiser=denoiser)
-        used.update(dataset=dataset, text=args.text, guidance_weight=weight, adagrad_lr=lr,
+                                       guidance_weight=weight, lr=lr, head_input=args.head_input, seed=args.seed,
+                                       denoiser=denoiser)
+        used.update(dataset=dataset, text=args.text, guidance_weight=weight, adagrad_lr=lr, head_input=args.head_input,
                     adagrad_steps=guidance.ADAGRAD_STEPS, text_head=f"guide_{dataset}_text")
         extra["texts"] = np.array([args.text] * args.n)
     elif args.task == "fill":
@@ -240,6 +241,8 @@ def main(argv=None):
                    "tasks.TEXT_GUIDANCE_WEIGHT for --task text, chapter 06)")
     p.add_argument("--lr", type=float, default=None, help="Adagrad learning rate of Alg. 1, 2 and 4 "
                    "(default: the book's choice for the task and the number of steps)")
+    p.add_argument("--head-input", default="x_t", choices=["x_t", "x0_hat"], help="--task text: what the text head reads, x_t (Alg. 2) or "
+                   "x0_hat (the denoiser's estimate of the clean sequence; not in the paper, chapter 06 section 8)")
     p.add_argument("--order", default=None, choices=["N2E", "E2N"], help="--task geometry: neutral face first "
                    "(N2E, the default) or last (E2N)")
     p.add_argument("--passes", type=int, default=5, help="--task geometry: harmonising passes of Alg. 4 (default 5)")

@@ -7,7 +7,9 @@ The model is never changed: guidance is a function ``guide(x_hat, xt, t, out)`` 
 * :class:`OptimisationGuidance`, the paper's choice (after Diffusion-LM [51]):
       x_{t-1} = argmax_x [ lambda log p_theta(x | x_t) + score(x, t-1) ]       (Alg. 1 line 10)
   approximated by a few Adagrad steps started from x_hat_{t-1}.  score is log p_phi(y | x, t-1)
-  for label control (Alg. 1) and cos(BiT(x, t-1), E(c)) for text control (Alg. 2, Eq. 10).
+  for label control (Alg. 1) and cos(BiT(x, t-1), E(c)) for text control (Alg. 2, Eq. 10), or
+  (not in the paper) cos(BiT(x0_hat(x, t-1), 0), E(c)), the head reading the denoiser's estimate of
+  the clean sequence (:func:`denoised_text_score`).
   With sigma_t^2 the variance of p_theta, lambda log p_theta(x | x_t) = -lambda ||x - mu||^2 /
   (2 sigma_t^2) + const: a spring that holds x near the model's mean, stiffer at small t.
 * :class:`ReconstructionGuidance` (not in the paper; Ho et al. 2022, "video diffusion models", with
@@ -45,6 +47,25 @@ def classifier_score(classifier, labels):
 def text_score(head, text_embeddings):
     """score(x, t) = cos(BiT(x, t), E(c)) (B,) of the text head for text embeddings (B, D) (Eq. 10)."""
     return lambda x, t: head.cosine(x, t, text_embeddings.to(x.device))
+
+
+def denoised_text_score(head, model, diffusion, text_embeddings):
+    """score(x, t) = cos(BiT(x0_hat(x, t), 0), E(c)) (B,): Eq. 10 read on the denoiser's estimate
+    x0_hat(x, t) = (x - sqrt(1 - abar_t) eps_theta(x, t)) / sqrt(abar_t) (Eq. 6 inverted) instead of
+    on x itself (not in the paper; the "forward universal guidance" of Bansal et al. 2023).
+
+    At large t, x holds a factor sqrt(abar_t) of the sequence (a few per cent at t = 1000), too little
+    for a head to read the order of the expression, which the chain settles there (chapter 06); the
+    denoiser's estimate is a clean-looking sequence at every t, read by the head as at t = 0, and
+    the gradient reaches x through the denoiser.  Being a function of x, the estimate holds no more
+    of the order than x does: chapter 06 section 8 measures no gain.  Costs a denoiser forward and
+    backward pass per Adagrad step.  ``diffusion`` must be the model's full (not respaced) schedule: t is the time
+    label fed to the networks, which is a step of that schedule (t = 0: x0_hat = x)."""
+    def score(x, t):
+        steps = t.detach().round().long().cpu()
+        x0_hat = diffusion.predict_x0(x, steps, model(x, t))
+        return head.cosine(x0_hat, torch.zeros_like(t), text_embeddings.to(x.device))
+    return score
 
 
 def gradient_at(xt, fn):

@@ -18,7 +18,7 @@ from .diffusion import GaussianDiffusion, named_betas
 from .evaluation import check_class_names
 from .face.sequences import check_num_frames
 from .guidance import (GUIDANCE_WEIGHT, MeanShiftGuidance, OptimisationGuidance, ReconstructionGuidance,
-                       chain, classifier_score, text_score)
+                       chain, classifier_score, denoised_text_score, text_score)
 from .inpainting import KnownFrames, check_fill_input, keep_known
 from .models.denoiser import Denoiser, DenoiserConfig
 from .models.noisy_classifier import NoisyClassifier, NoisyClassifierConfig, NoisyTextHead, TextHeadConfig
@@ -40,6 +40,9 @@ TEXT_DATASET = "coma+bu"  # paper §5.2: text control works on CoMA and BU-4DFE 
 TEXT_GUIDANCE_WEIGHT = 0.0003
 TEXT_LR = 0.2
 TEXT_LR_REFERENCE_STEPS = 100
+# What the text head reads in Eq. 10: x_t itself (Alg. 2 as written) or the denoiser's estimate x0_hat
+# of the clean sequence (not in the paper: guidance.denoised_text_score, chapter 06 section 8)
+HEAD_INPUTS = ("x_t", "x0_hat")
 
 
 @dataclass
@@ -193,7 +196,8 @@ def _guided_sample(guide, denoiser, steps, n, num_frames, seed, progress, callba
 
 
 def text_control(text, n=8, dataset=TEXT_DATASET, num_frames=40, steps=None, guidance_weight=TEXT_GUIDANCE_WEIGHT,
-                 lr=None, seed=0, denoiser=None, head=None, encoder=None, progress=True, callback=None):
+                 lr=None, head_input="x_t", seed=0, denoiser=None, head=None, encoder=None, progress=True,
+                 callback=None):
     """Text control (Alg. 2): n sequences (n, F, 68, 3) float32 in mm that show what ``text`` says.
 
     text: a description ("disgust high smile", "from the neutral face to bareteeth"), or a list of
@@ -203,8 +207,13 @@ def text_control(text, n=8, dataset=TEXT_DATASET, num_frames=40, steps=None, gui
     ``guidance_weight`` (default TEXT_GUIDANCE_WEIGHT, not the paper's 0.01: the cosine's gradient is
     small, and Adagrad's steps follow the sign of the sum; chapter 06), rate ``lr`` (default
     :func:`text_lr`).  steps: None for the paper's T = 2000, or fewer (respaced).
+    head_input: "x_t" (Alg. 2: the head reads the candidate x_{t-1}) or "x0_hat" (not in the paper:
+    it reads the denoiser's estimate of the clean sequence, :func:`~facelib.guidance.denoised_text_score`;
+    twice the cost; chapter 06 section 8 measures that it does not fix the order of enriched texts).
     """
     from .text import get_encoder
+    if head_input not in HEAD_INPUTS:
+        raise ValueError(f"head_input must be one of {HEAD_INPUTS}, got {head_input!r}")
     _check_n(n)
     num_frames = check_num_frames(num_frames)
     texts = [text] * n if isinstance(text, str) else list(text) if isinstance(text, (list, tuple)) else None
@@ -214,7 +223,9 @@ def text_control(text, n=8, dataset=TEXT_DATASET, num_frames=40, steps=None, gui
     head = head or load_text_head(dataset)
     if head.classifier_type != "text":
         raise ValueError("text control needs a text head (load_text_head), not a label classifier")
-    score = text_score(head.model, embeddings)
+    denoiser = denoiser or load_denoiser(f"denoiser_{head.dataset}")
+    score = (text_score(head.model, embeddings) if head_input == "x_t" else
+             denoised_text_score(head.model, denoiser.model, denoiser.diffusion, embeddings))
     lr = text_lr(steps, head.meta["training"]["num_diffusion_steps"]) if lr is None else lr
     return _guided_sample(head, denoiser, steps, n, num_frames, seed, progress, callback,
                           lambda diffusion: OptimisationGuidance(score, diffusion, guidance_weight, lr))

@@ -8,7 +8,7 @@ import torch
 
 from facelib import baselines, config, data, descriptions, evaluation, tasks, text
 from facelib.diffusion import GaussianDiffusion, linear_betas
-from facelib.guidance import OptimisationGuidance, text_score
+from facelib.guidance import OptimisationGuidance, denoised_text_score, text_score
 from facelib.models.noisy_classifier import NoisyTextHead, TextHeadConfig
 
 
@@ -80,6 +80,41 @@ def test_one_guided_step_increases_the_cosine_with_the_text(head):
     t_prev = diffusion.model_time(t - 1, 4)
     guided = OptimisationGuidance(score, diffusion, guidance_weight=0.0, lr=0.01)(x_hat, xt, t, out)
     assert (score(guided, t_prev) > score(x_hat, t_prev)).all()
+
+
+def test_denoised_score_reads_the_denoisers_estimate(head, denoiser):
+    # cos(BiT(x0_hat(x, t), 0), E(c)): at t = 0 the estimate is x itself, so it equals Eq. 10 at t = 0;
+    # at t > 0 it is the head's cosine on x0_hat = (x - sqrt(1 - abar_t) eps_theta) / sqrt(abar_t).
+    emb = torch.as_tensor(text.get_encoder().encode(["high smile", "from surprise to the neutral face"]))
+    full = denoiser.diffusion
+    score = denoised_text_score(head.model, denoiser.model, full, emb)
+    x = torch.randn(2, 40, 68, 3, generator=torch.Generator().manual_seed(3))
+    zero = torch.zeros(2)
+    with torch.no_grad():
+        torch.testing.assert_close(score(x, zero), text_score(head.model, emb)(x, zero))
+        t = torch.tensor([700.0, 1500.0])
+        x0_hat = full.predict_x0(x, t.long(), denoiser.model(x, t))
+        torch.testing.assert_close(score(x, t), head.model.cosine(x0_hat, zero, emb))
+        assert not torch.allclose(score(x, t), text_score(head.model, emb)(x, t))
+    # one guided step (lambda = 0) at a large t raises it: the gradient reaches x through the denoiser
+    diffusion = full.respace(100)
+    xt = torch.randn(2, 40, 68, 3, generator=torch.Generator().manual_seed(4))
+    with torch.no_grad():
+        out = diffusion.p_mean_variance(denoiser.model, xt, 80)
+    t_prev = diffusion.model_time(79, 2)
+    guided = OptimisationGuidance(score, diffusion, guidance_weight=0.0, lr=0.01)(out["mean"], xt, 80, out)
+    with torch.no_grad():
+        assert (score(guided, t_prev) > score(out["mean"], t_prev)).all()
+
+
+def test_text_control_reading_x0_hat_is_deterministic_and_checked(head, denoiser):
+    kwargs = dict(steps=5, seed=2, progress=False, head=head, denoiser=denoiser)
+    a = tasks.text_control("from the neutral face to happy", 2, head_input="x0_hat", **kwargs)
+    assert a.shape == (2, 40, 68, 3) and np.isfinite(a).all()
+    assert np.array_equal(a, tasks.text_control("from the neutral face to happy", 2, head_input="x0_hat", **kwargs))
+    assert not np.array_equal(a, tasks.text_control("from the neutral face to happy", 2, **kwargs))
+    with pytest.raises(ValueError, match="head_input must be one of"):
+        tasks.text_control("sad", 1, head_input="x0", **kwargs)
 
 
 def test_text_control_is_deterministic_and_follows_the_text(head, denoiser):
@@ -160,6 +195,9 @@ def test_cli_text_task_writes_npz(tmp_path):
     config = json.loads(str(npz["config"]))
     assert config["dataset"] == "coma+bu" and config["text_head"] == "guide_coma+bu_text"
     assert config["adagrad_lr"] == pytest.approx(tasks.text_lr(5))
-    assert config["guidance_weight"] == tasks.TEXT_GUIDANCE_WEIGHT
+    assert config["guidance_weight"] == tasks.TEXT_GUIDANCE_WEIGHT and config["head_input"] == "x_t"
+    assert main(["sample", "--task", "text", "--text", "from sad to the neutral face", "--n", "1", "--steps", "3",
+                 "--head-input", "x0_hat", "--out", str(out)]) == 0
+    assert json.loads(str(np.load(out)["config"]))["head_input"] == "x0_hat"
     with pytest.raises(SystemExit):
         main(["sample", "--task", "text", "--n", "2", "--out", str(out)])
