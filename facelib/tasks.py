@@ -1,7 +1,8 @@
 """The paper's sampling tasks as functions (§3.2, App. C), all on one unconditional DDPM.
 
 Loading the trained denoiser, unconditional generation (§3.1), label control (§3.2, Alg. 1),
-text control (Alg. 2), expression filling (Alg. 3) and geometry-adaptive generation (Alg. 4).  Every task uses the same
+text control (Alg. 2; and, not in the paper, a text decoder's sequence refined by the DDPM),
+expression filling (Alg. 3) and geometry-adaptive generation (Alg. 4).  Every task uses the same
 unconditional denoiser: it is never retrained, only its reverse process is guided.
 """
 from __future__ import annotations
@@ -43,6 +44,8 @@ TEXT_LR_REFERENCE_STEPS = 100
 # What the text head reads in Eq. 10: x_t itself (Alg. 2 as written) or the denoiser's estimate x0_hat
 # of the clean sequence (not in the paper: guidance.denoised_text_score, chapter 06 section 8)
 HEAD_INPUTS = ("x_t", "x0_hat")
+# decoder_then_diffusion's re-noising step (not in the paper): our choice from chapter 06 section 9's sweep
+DECODER_START = 400
 
 
 @dataclass
@@ -214,11 +217,7 @@ def text_control(text, n=8, dataset=TEXT_DATASET, num_frames=40, steps=None, gui
     from .text import get_encoder
     if head_input not in HEAD_INPUTS:
         raise ValueError(f"head_input must be one of {HEAD_INPUTS}, got {head_input!r}")
-    _check_n(n)
-    num_frames = check_num_frames(num_frames)
-    texts = [text] * n if isinstance(text, str) else list(text) if isinstance(text, (list, tuple)) else None
-    if texts is None or len(texts) != n:
-        raise ValueError(f"text must be a string or a list of n={n} strings, got {text!r}")
+    texts, num_frames = _text_list(text, n), check_num_frames(num_frames)
     embeddings = torch.as_tensor((encoder or get_encoder()).encode(texts))
     head = head or load_text_head(dataset)
     if head.classifier_type != "text":
@@ -229,6 +228,39 @@ def text_control(text, n=8, dataset=TEXT_DATASET, num_frames=40, steps=None, gui
     lr = text_lr(steps, head.meta["training"]["num_diffusion_steps"]) if lr is None else lr
     return _guided_sample(head, denoiser, steps, n, num_frames, seed, progress, callback,
                           lambda diffusion: OptimisationGuidance(score, diffusion, guidance_weight, lr))
+
+
+def _text_list(text, n):
+    """n texts from one text or a list of n (each is checked by the encoder)."""
+    _check_n(n)
+    texts = [text] * n if isinstance(text, str) else list(text) if isinstance(text, (list, tuple)) else None
+    if texts is None or len(texts) != n:
+        raise ValueError(f"text must be a string or a list of n={n} strings, got {text!r}")
+    return texts
+
+
+def decoder_then_diffusion(text, n=8, start=DECODER_START, dataset=TEXT_DATASET, num_frames=40, steps=None, seed=0,
+                           denoiser=None, decoder=None, encoder=None, progress=True):
+    """Not in the paper (chapter 06 section 9): the MotionCLIP-style decoder's sequence for ``text``,
+    re-noised to step ``start`` with Eq. 3 and denoised by the unconditional DDPM from there (SDEdit,
+    Meng et al. 2022).  The deterministic decoder hears the words (the order of an enriched text
+    too); the reverse chain from x_start ~ q(x_start | x_0 = decoder(text)) gives every call another
+    sequence near it: the larger ``start``, the more diverse and the less faithful.
+
+    start: a step of the paper's chain, 1..T (respaced chains start at their nearest step).
+    Returns (n, F, 68, 3) float32 in mm."""
+    from .baselines import generate_from_text, load_baseline
+    texts, num_frames = _text_list(text, n), check_num_frames(num_frames)
+    decoder = decoder or load_baseline("motionclip", dataset)
+    denoiser = denoiser or load_denoiser(f"denoiser_{dataset}")
+    diffusion = denoiser.diffusion_with(steps)
+    if isinstance(start, bool) or not isinstance(start, (int, np.integer)) or not 1 <= start <= denoiser.diffusion.num_steps:
+        raise ValueError(f"start must be a step in 1..{denoiser.diffusion.num_steps}, got {start!r}")
+    k = max(1, int(np.argmin(np.abs(diffusion.timesteps - start))))
+    x0 = torch.as_tensor(denoiser.normalizer.normalize(generate_from_text(decoder, texts, num_frames, encoder)))
+    x_start = diffusion.q_sample(x0, torch.full((n,), k), generator=torch.Generator().manual_seed(seed))
+    x = diffusion.sample(denoiser.model, x0.shape, seed=seed, x_T=x_start, start_step=k, progress=progress)
+    return denoiser.normalizer.denormalize(x.detach()).numpy()
 
 
 def unconditional(n, num_frames=40, seed=0, steps=None, denoiser=None, progress=True, callback=None):

@@ -117,6 +117,27 @@ def test_text_control_reading_x0_hat_is_deterministic_and_checked(head, denoiser
         tasks.text_control("sad", 1, head_input="x0", **kwargs)
 
 
+def test_decoder_then_diffusion_trades_fidelity_for_diversity(denoiser):
+    # SDEdit from the MotionCLIP-style decoder: deterministic for a seed, different draws for one text,
+    # nearer the decoded sequence when re-noised to a smaller step
+    decoder = baselines.load_baseline("motionclip", "coma+bu")
+    text_ = "from the neutral face to bareteeth"
+    decoded = baselines.generate_from_text(decoder, [text_])[0]
+    kwargs = dict(steps=50, progress=False, denoiser=denoiser, decoder=decoder)
+    near = tasks.decoder_then_diffusion(text_, 3, start=200, seed=0, **kwargs)
+    far = tasks.decoder_then_diffusion(text_, 3, start=1500, seed=0, **kwargs)
+    assert near.shape == (3, 40, 68, 3) and near.dtype == np.float32
+    assert np.array_equal(near, tasks.decoder_then_diffusion(text_, 3, start=200, seed=0, **kwargs))
+    assert not np.allclose(near[0], near[1])  # a family of sequences, not one
+    dist = lambda x: np.linalg.norm(x - decoded, axis=-1).mean()  # noqa: E731
+    assert dist(near) < dist(far)
+    for bad in (0, 2001, 3.5, True):
+        with pytest.raises(ValueError, match="start must be a step in 1..2000"):
+            tasks.decoder_then_diffusion(text_, 1, start=bad, **kwargs)
+    with pytest.raises(ValueError, match="empty"):
+        tasks.decoder_then_diffusion("", 1, **kwargs)
+
+
 def test_text_control_is_deterministic_and_follows_the_text(head, denoiser):
     labels = ["high_smile", "mouth_open", "happy", "surprise", "eyebrow", "anger"]
     texts = [descriptions.raw_text(y) for y in labels]
