@@ -5,7 +5,9 @@ Usage: python benchmarks/text_control.py [--n 64] [--steps 2000 200 100] [--lr R
 The n sequences cycle through the raw texts of the 18 labels of "coma+bu" (the raw-text task of
 §5.2, type-I IC), or with --enriched through the enriched sentences of the 36 (label, order) classes
 ("from the neutral face to X" / "from X to the neutral face", type-S IC).  --head-input lists what
-the text head reads (x_t: Alg. 2; x0_hat: the denoiser's estimate, chapter 06 section 8).  For each number of reverse steps (2000 = the paper's T; fewer = respaced) it prints the
+the text head reads (x_t: Alg. 2; x0_hat: the denoiser's estimate, chapter 06 section 8).  The
+decoder + DDPM rows (not in the paper, chapter 06 section 9) re-noise the baseline's sequence to
+tasks.DECODER_START and denoise it.  For each number of reverse steps (2000 = the paper's T; fewer = respaced) it prints the
 wall time, the time per step, and the type-I IC accuracy and FID of the guided sequences (FID
 against the training split, from n sequences: compare rows with each other, not with tables
 computed from another n), and the Adagrad rate used (default: tasks.text_lr, scaled with the number
@@ -53,6 +55,14 @@ def main():
     dt = time.perf_counter() - t0
     s = ev.score(x, targets)
     print(f"{'MotionCLIP-style':<26}{'':>6}{dt:>10.2f}{'':>9}{s['accuracy']:>8.1f}{s['fid']:>8.2f}", flush=True)
+    for steps in args.steps:  # not in the paper: the decoder's sequence re-noised and denoised (chapter 06 section 9)
+        t0 = time.perf_counter()
+        x = tasks.decoder_then_diffusion(texts, args.n, steps=steps, seed=0, denoiser=denoiser, decoder=model,
+                                         encoder=encoder, progress=False)
+        dt = time.perf_counter() - t0
+        s = ev.score(x, targets)
+        print(f"{f'decoder + DDPM (t0={tasks.DECODER_START})':<26}{steps:>6}{dt:>10.1f}{'':>9}"
+              f"{s['accuracy']:>8.1f}{s['fid']:>8.2f}", flush=True)
     for steps, head_input in itertools.product(args.steps, args.head_input):
         lr = tasks.text_lr(steps) if args.lr is None else args.lr
         t0 = time.perf_counter()

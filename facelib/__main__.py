@@ -118,12 +118,19 @@ def _sample(args):
     if args.task == "unconditional":
         landmarks = tasks.unconditional(args.n, num_frames=args.length, seed=args.seed, steps=args.steps,
                                         denoiser=denoiser)
+    elif args.task == "text" and args.decoder_start is not None:
+        landmarks = tasks.decoder_then_diffusion(args.text, args.n, start=args.decoder_start, dataset=dataset,
+                                                 num_frames=args.length, steps=args.steps, seed=args.seed,
+                                                 denoiser=denoiser)
+        used.update(dataset=dataset, text=args.text, method="decoder_then_diffusion", decoder_start=args.decoder_start,
+                    decoder=f"motionclip_{dataset}")
+        extra["texts"] = np.array([args.text] * args.n)
     elif args.task == "text":
         landmarks = tasks.text_control(args.text, args.n, dataset=dataset, num_frames=args.length, steps=args.steps,
                                        guidance_weight=weight, lr=lr, head_input=args.head_input, seed=args.seed,
                                        denoiser=denoiser)
-        used.update(dataset=dataset, text=args.text, guidance_weight=weight, adagrad_lr=lr, head_input=args.head_input,
-                    adagrad_steps=guidance.ADAGRAD_STEPS, text_head=f"guide_{dataset}_text")
+        used.update(dataset=dataset, text=args.text, method="alg2", guidance_weight=weight, adagrad_lr=lr,
+                    head_input=args.head_input, adagrad_steps=guidance.ADAGRAD_STEPS, text_head=f"guide_{dataset}_text")
         extra["texts"] = np.array([args.text] * args.n)
     elif args.task == "fill":
         if args.input is None or args.known is None:
@@ -243,6 +250,9 @@ def main(argv=None):
                    "(default: the book's choice for the task and the number of steps)")
     p.add_argument("--head-input", default="x_t", choices=["x_t", "x0_hat"], help="--task text: what the text head reads, x_t (Alg. 2) or "
                    "x0_hat (the denoiser's estimate of the clean sequence; not in the paper, chapter 06 section 8)")
+    p.add_argument("--decoder-start", type=int, default=None, help="--task text: instead of Alg. 2, re-noise the "
+                   "MotionCLIP-style decoder's sequence to this step and denoise it (not in the paper; chapter 06 section 9 "
+                   "uses facelib.tasks.DECODER_START)")
     p.add_argument("--order", default=None, choices=["N2E", "E2N"], help="--task geometry: neutral face first "
                    "(N2E, the default) or last (E2N)")
     p.add_argument("--passes", type=int, default=5, help="--task geometry: harmonising passes of Alg. 4 (default 5)")

@@ -220,5 +220,10 @@ def test_cli_text_task_writes_npz(tmp_path):
     assert main(["sample", "--task", "text", "--text", "from sad to the neutral face", "--n", "1", "--steps", "3",
                  "--head-input", "x0_hat", "--out", str(out)]) == 0
     assert json.loads(str(np.load(out)["config"]))["head_input"] == "x0_hat"
+    assert main(["sample", "--task", "text", "--text", "from sad to the neutral face", "--n", "2", "--steps", "20",
+                 "--decoder-start", "400", "--out", str(out)]) == 0
+    config = json.loads(str(np.load(out)["config"]))
+    assert config["method"] == "decoder_then_diffusion" and config["decoder_start"] == 400
+    assert np.load(out)["landmarks"].shape == (2, 40, 68, 3)
     with pytest.raises(SystemExit):
         main(["sample", "--task", "text", "--n", "2", "--out", str(out)])
