@@ -253,6 +253,9 @@ def decoder_then_diffusion(text, n=8, start=DECODER_START, dataset=TEXT_DATASET,
     texts, num_frames = _text_list(text, n), check_num_frames(num_frames)
     decoder = decoder or load_baseline("motionclip", dataset)
     denoiser = denoiser or load_denoiser(f"denoiser_{dataset}")
+    if denoiser.meta["training"]["dataset"] != dataset:
+        raise ValueError(f"the denoiser was trained on {denoiser.meta['training']['dataset']!r}, the decoder's "
+                         f"sequences are of {dataset!r}: use denoiser_{dataset}")
     diffusion = denoiser.diffusion_with(steps)
     if isinstance(start, bool) or not isinstance(start, (int, np.integer)) or not 1 <= start <= denoiser.diffusion.num_steps:
         raise ValueError(f"start must be a step in 1..{denoiser.diffusion.num_steps}, got {start!r}")

@@ -136,6 +136,9 @@ def test_decoder_then_diffusion_trades_fidelity_for_diversity(denoiser):
             tasks.decoder_then_diffusion(text_, 1, start=bad, **kwargs)
     with pytest.raises(ValueError, match="empty"):
         tasks.decoder_then_diffusion("", 1, **kwargs)
+    with pytest.raises(ValueError, match="use denoiser_coma"):
+        tasks.decoder_then_diffusion(text_, 1, steps=5, progress=False, decoder=decoder,
+                                     denoiser=tasks.load_denoiser("denoiser_coma"))
 
 
 def test_text_control_is_deterministic_and_follows_the_text(head, denoiser):
