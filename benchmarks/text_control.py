@@ -4,14 +4,14 @@ Usage: python benchmarks/text_control.py [--n 64] [--steps 2000 200 100] [--lr R
                                          [--head-input x_t x0_hat]
 The n sequences cycle through the raw texts of the 18 labels of "coma+bu" (the raw-text task of
 §5.2, type-I IC), or with --enriched through the enriched sentences of the 36 (label, order) classes
-("from the neutral face to X" / "from X to the neutral face", type-S IC).  --head-input lists what
-the text head reads (x_t: Alg. 2; x0_hat: the denoiser's estimate, chapter 06 section 8).  The
-decoder + DDPM rows (not in the paper, chapter 06 section 9) re-noise the baseline's sequence to
-tasks.DECODER_START and denoise it.  For each number of reverse steps (2000 = the paper's T; fewer = respaced) it prints the
-wall time, the time per step, and the type-I IC accuracy and FID of the guided sequences (FID
-against the training split, from n sequences: compare rows with each other, not with tables
-computed from another n), and the Adagrad rate used (default: tasks.text_lr, scaled with the number
-of steps; --lr fixes it).  The MotionCLIP-style baseline (one decoder pass) is timed too.
+("from the neutral face to X" / "from X to the neutral face", type-S IC).  For each number of reverse
+steps (2000 = the paper's T; fewer = respaced) it prints the wall time, the time per step, and the
+IC accuracy and FID of the generated sequences (FID against the training split, from n sequences:
+compare rows with each other, not with tables computed from another n), and the Adagrad rate used
+(default: tasks.text_lr, scaled with the number of steps; --lr fixes it).  --head-input lists what
+the text head reads (x_t: Alg. 2; x0_hat: the denoiser's estimate, chapter 06 section 8).  Also
+timed: the MotionCLIP-style baseline (one decoder pass) and decoder + DDPM (not in the paper,
+chapter 06 section 9: the baseline's sequence re-noised to tasks.DECODER_START and denoised).
 """
 import argparse
 import itertools
@@ -42,8 +42,9 @@ def main():
     texts = [descriptions.enriched_texts(*c.split())[0] if args.enriched else descriptions.raw_text(c) for c in classes]
     targets = np.array([ev.class_index(c) for c in classes])
     encoder.encode(texts)  # load the encoder once, outside the timings
+    task = "enriched (IC S)" if args.enriched else "raw (IC I)"
     print(f"cores: {os.cpu_count()}, torch threads: {torch.get_num_threads()}, dataset: {DATASET}, "
-          f"n = {args.n}, lambda {tasks.TEXT_GUIDANCE_WEIGHT}, task {'enriched (IC S)' if args.enriched else 'raw (IC I)'}")
+          f"n = {args.n}, lambda {tasks.TEXT_GUIDANCE_WEIGHT}, task {task}")
     print(f"{'method':<26}{'steps':>6}{'seconds':>10}{'ms/step':>9}{'Acc %':>8}{'FID':>8}{'lr':>8}")
     test = data.load_dataset(DATASET, "test")
     pick = np.random.default_rng(0).choice(len(test), min(args.n, len(test)), replace=False)

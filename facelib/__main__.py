@@ -103,6 +103,10 @@ def _sample(args):
         raise ValueError(f"--task {args.task} needs --label (e.g. --label high_smile)")
     if args.task == "text" and args.text is None:
         raise ValueError('--task text needs --text (e.g. --text "disgust high smile")')
+    if args.decoder_start is not None and (args.task != "text" or args.lr is not None or args.guidance_weight is not None
+                                           or args.head_input != "x_t"):
+        raise ValueError("--decoder-start belongs to --task text and replaces Alg. 2's guidance: it takes no --lr, "
+                         "--guidance-weight or --head-input")
     dataset = args.dataset or (tasks.TEXT_DATASET if args.task == "text" else "coma")
     denoiser = tasks.load_denoiser(args.checkpoint or f"denoiser_{dataset}")
     used = {"task": args.task, "n": args.n, "length": args.length, "seed": args.seed,
@@ -248,11 +252,12 @@ def main(argv=None):
                    "tasks.TEXT_GUIDANCE_WEIGHT for --task text, chapter 06)")
     p.add_argument("--lr", type=float, default=None, help="Adagrad learning rate of Alg. 1, 2 and 4 "
                    "(default: the book's choice for the task and the number of steps)")
-    p.add_argument("--head-input", default="x_t", choices=["x_t", "x0_hat"], help="--task text: what the text head reads, x_t (Alg. 2) or "
-                   "x0_hat (the denoiser's estimate of the clean sequence; not in the paper, chapter 06 section 8)")
+    p.add_argument("--head-input", default="x_t", choices=["x_t", "x0_hat"], help="--task text: what the text head "
+                   "reads, x_t (Alg. 2) or x0_hat (the denoiser's estimate of the clean sequence; not in the paper, "
+                   "chapter 06 section 8)")
     p.add_argument("--decoder-start", type=int, default=None, help="--task text: instead of Alg. 2, re-noise the "
-                   "MotionCLIP-style decoder's sequence to this step and denoise it (not in the paper; chapter 06 section 9 "
-                   "uses facelib.tasks.DECODER_START)")
+                   "MotionCLIP-style decoder's sequence to this step and denoise it (not in the paper; chapter 06 "
+                   "section 9 uses facelib.tasks.DECODER_START)")
     p.add_argument("--order", default=None, choices=["N2E", "E2N"], help="--task geometry: neutral face first "
                    "(N2E, the default) or last (E2N)")
     p.add_argument("--passes", type=int, default=5, help="--task geometry: harmonising passes of Alg. 4 (default 5)")

@@ -59,8 +59,8 @@ def denoised_text_score(head, model, diffusion, text_embeddings):
     denoiser's estimate is a clean-looking sequence at every t, read by the head as at t = 0, and
     the gradient reaches x through the denoiser.  Being a function of x, the estimate holds no more
     of the order than x does: chapter 06 section 8 measures no gain.  Costs a denoiser forward and
-    backward pass per Adagrad step.  ``diffusion`` must be the model's full (not respaced) schedule: t is the time
-    label fed to the networks, which is a step of that schedule (t = 0: x0_hat = x)."""
+    backward pass per Adagrad step.  ``diffusion`` must be the model's full (not respaced) schedule:
+    t is the time label fed to the networks, which is a step of that schedule (t = 0: x0_hat = x)."""
     def score(x, t):
         steps = t.detach().round().long().cpu()
         x0_hat = diffusion.predict_x0(x, steps, model(x, t))

@@ -257,8 +257,9 @@ def decoder_then_diffusion(text, n=8, start=DECODER_START, dataset=TEXT_DATASET,
         raise ValueError(f"the denoiser was trained on {denoiser.meta['training']['dataset']!r}, the decoder's "
                          f"sequences are of {dataset!r}: use denoiser_{dataset}")
     diffusion = denoiser.diffusion_with(steps)
-    if isinstance(start, bool) or not isinstance(start, (int, np.integer)) or not 1 <= start <= denoiser.diffusion.num_steps:
-        raise ValueError(f"start must be a step in 1..{denoiser.diffusion.num_steps}, got {start!r}")
+    last = denoiser.diffusion.num_steps
+    if isinstance(start, bool) or not isinstance(start, (int, np.integer)) or not 1 <= start <= last:
+        raise ValueError(f"start must be a step in 1..{last}, got {start!r}")
     k = max(1, int(np.argmin(np.abs(diffusion.timesteps - start))))
     x0 = torch.as_tensor(denoiser.normalizer.normalize(generate_from_text(decoder, texts, num_frames, encoder)))
     x_start = diffusion.q_sample(x0, torch.full((n,), k), generator=torch.Generator().manual_seed(seed))

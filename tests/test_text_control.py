@@ -209,7 +209,7 @@ def test_motionclip_baseline_is_deterministic():
         baselines.generate_from_text(model, [""])
 
 
-def test_cli_text_task_writes_npz(tmp_path):
+def test_cli_text_task_writes_npz(tmp_path, capsys):
     from facelib.__main__ import main
     out = tmp_path / "text.npz"
     assert main(["sample", "--task", "text", "--text", "disgust high smile", "--n", "2", "--steps", "5",
@@ -228,5 +228,10 @@ def test_cli_text_task_writes_npz(tmp_path):
     config = json.loads(str(np.load(out)["config"]))
     assert config["method"] == "decoder_then_diffusion" and config["decoder_start"] == 400
     assert np.load(out)["landmarks"].shape == (2, 40, 68, 3)
+    for extra in (["--lr", "0.1"], ["--head-input", "x0_hat"]):  # options of Alg. 2 that the decoder route would ignore
+        with pytest.raises(SystemExit):
+            main(["sample", "--task", "text", "--text", "sad", "--n", "1", "--steps", "5", "--decoder-start", "400",
+                  *extra, "--out", str(out)])
+        assert "replaces Alg. 2's guidance" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main(["sample", "--task", "text", "--n", "2", "--out", str(out)])
