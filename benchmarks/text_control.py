@@ -1,7 +1,7 @@
 """Time text control (Alg. 2) for 64 sequences and score them; print a table.
 
 Usage: python benchmarks/text_control.py [--n 64] [--steps 2000 200 100] [--lr R] [--enriched]
-                                         [--head-input x_t x0_hat]
+                                         [--head-input x_t x0_hat] [--score cosine contrastive]
 The n sequences cycle through the raw texts of the 18 labels of "coma+bu" (the raw-text task of
 §5.2, type-I IC), or with --enriched through the enriched sentences of the 36 (label, order) classes
 ("from the neutral face to X" / "from X to the neutral face", type-S IC).  For each number of reverse
@@ -9,7 +9,10 @@ steps (2000 = the paper's T; fewer = respaced) it prints the wall time, the time
 IC accuracy and FID of the generated sequences (FID against the training split, from n sequences:
 compare rows with each other, not with tables computed from another n), and the Adagrad rate used
 (default: tasks.text_lr, scaled with the number of steps; --lr fixes it).  --head-input lists what
-the text head reads (x_t: Alg. 2; x0_hat: the denoiser's estimate, chapter 06 section 8).  Also
+the text head reads (x_t: Alg. 2; x0_hat: the denoiser's estimate, chapter 06 section 8), --score
+the score Alg. 2 climbs (cosine: Eq. 10; contrastive: the head's log-probability of the text,
+chapter 06 section 10; it reads x_t only, so it is run with x_t).  The lambda is text_control's
+default for each score.  Also
 timed: the MotionCLIP-style baseline (one decoder pass) and decoder + DDPM (not in the paper,
 chapter 06 section 9: the baseline's sequence re-noised to tasks.DECODER_START and denoised).
 """
@@ -33,6 +36,7 @@ def main():
     parser.add_argument("--lr", type=float, default=None, help="Adagrad rate for every row (default: tasks.text_lr)")
     parser.add_argument("--enriched", action="store_true", help="the enriched-text task (type-S IC)")
     parser.add_argument("--head-input", nargs="+", default=["x_t"], choices=list(tasks.HEAD_INPUTS))
+    parser.add_argument("--score", nargs="+", default=["cosine"], choices=list(tasks.TEXT_SCORES))
     args = parser.parse_args()
     kind = "S" if args.enriched else "I"
     ev = evaluation.load_evaluator(DATASET, kind)
@@ -44,7 +48,8 @@ def main():
     encoder.encode(texts)  # load the encoder once, outside the timings
     task = "enriched (IC S)" if args.enriched else "raw (IC I)"
     print(f"cores: {os.cpu_count()}, torch threads: {torch.get_num_threads()}, dataset: {DATASET}, "
-          f"n = {args.n}, lambda {tasks.TEXT_GUIDANCE_WEIGHT}, task {task}")
+          f"n = {args.n}, lambda {tasks.TEXT_GUIDANCE_WEIGHT} (cosine) / {tasks.CONTRASTIVE_GUIDANCE_WEIGHT} "
+          f"(contrastive), task {task}")
     print(f"{'method':<26}{'steps':>6}{'seconds':>10}{'ms/step':>9}{'Acc %':>8}{'FID':>8}{'lr':>8}")
     test = data.load_dataset(DATASET, "test")
     pick = np.random.default_rng(0).choice(len(test), min(args.n, len(test)), replace=False)
@@ -64,14 +69,17 @@ def main():
         s = ev.score(x, targets)
         print(f"{f'decoder + DDPM (t0={tasks.DECODER_START})':<26}{steps:>6}{dt:>10.1f}{'':>9}"
               f"{s['accuracy']:>8.1f}{s['fid']:>8.2f}", flush=True)
-    for steps, head_input in itertools.product(args.steps, args.head_input):
+    for steps, head_input, score in itertools.product(args.steps, args.head_input, args.score):
+        if score == "contrastive" and head_input != "x_t":
+            continue  # the contrastive score reads x_t only
         lr = tasks.text_lr(steps) if args.lr is None else args.lr
         t0 = time.perf_counter()
-        x = tasks.text_control(texts, args.n, steps=steps, lr=lr, head_input=head_input, seed=0, head=head,
-                               denoiser=denoiser, encoder=encoder, progress=False)
+        x = tasks.text_control(texts, args.n, steps=steps, lr=lr, head_input=head_input, score=score, seed=0,
+                               head=head, denoiser=denoiser, encoder=encoder, progress=False)
         dt = time.perf_counter() - t0
         s = ev.score(x, targets)
-        print(f"{'ours, head reads ' + head_input:<26}{steps:>6}{dt:>10.1f}{1e3 * dt / steps:>9.1f}{s['accuracy']:>8.1f}"
+        name = f"ours, {score}, reads {head_input}"
+        print(f"{name:<26}{steps:>6}{dt:>10.1f}{1e3 * dt / steps:>9.1f}{s['accuracy']:>8.1f}"
               f"{s['fid']:>8.2f}{lr:>8.3g}", flush=True)
 
 

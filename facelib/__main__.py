@@ -104,9 +104,9 @@ def _sample(args):
     if args.task == "text" and args.text is None:
         raise ValueError('--task text needs --text (e.g. --text "disgust high smile")')
     if args.decoder_start is not None and (args.task != "text" or args.lr is not None or args.guidance_weight is not None
-                                           or args.head_input != "x_t"):
+                                           or args.head_input != "x_t" or args.score != "cosine"):
         raise ValueError("--decoder-start belongs to --task text and replaces Alg. 2's guidance: it takes no --lr, "
-                         "--guidance-weight or --head-input")
+                         "--guidance-weight, --head-input or --score")
     dataset = args.dataset or (tasks.TEXT_DATASET if args.task == "text" else "coma")
     denoiser = tasks.load_denoiser(args.checkpoint or f"denoiser_{dataset}")
     used = {"task": args.task, "n": args.n, "length": args.length, "seed": args.seed,
@@ -117,7 +117,8 @@ def _sample(args):
     if lr is None and args.task in ("text", "geometry", "label"):
         lr = (tasks.text_lr(args.steps) if args.task == "text" else tasks.GEOMETRY_LR if args.task == "geometry"
               else tasks.adagrad_lr(dataset, args.steps))
-    weight = ((tasks.TEXT_GUIDANCE_WEIGHT if args.task == "text" else guidance.GUIDANCE_WEIGHT)
+    text_weight = tasks.CONTRASTIVE_GUIDANCE_WEIGHT if args.score == "contrastive" else tasks.TEXT_GUIDANCE_WEIGHT
+    weight = ((text_weight if args.task == "text" else guidance.GUIDANCE_WEIGHT)
               if args.guidance_weight is None else args.guidance_weight)
     if args.task == "unconditional":
         landmarks = tasks.unconditional(args.n, num_frames=args.length, seed=args.seed, steps=args.steps,
@@ -131,10 +132,11 @@ def _sample(args):
         extra["texts"] = np.array([args.text] * args.n)
     elif args.task == "text":
         landmarks = tasks.text_control(args.text, args.n, dataset=dataset, num_frames=args.length, steps=args.steps,
-                                       guidance_weight=weight, lr=lr, head_input=args.head_input, seed=args.seed,
-                                       denoiser=denoiser)
+                                       guidance_weight=weight, lr=lr, head_input=args.head_input, score=args.score,
+                                       seed=args.seed, denoiser=denoiser)
         used.update(dataset=dataset, text=args.text, method="alg2", guidance_weight=weight, adagrad_lr=lr,
-                    head_input=args.head_input, adagrad_steps=guidance.ADAGRAD_STEPS, text_head=f"guide_{dataset}_text")
+                    head_input=args.head_input, score=args.score, adagrad_steps=guidance.ADAGRAD_STEPS,
+                    text_head=f"guide_{dataset}_text")
         extra["texts"] = np.array([args.text] * args.n)
     elif args.task == "fill":
         if args.input is None or args.known is None:
@@ -255,6 +257,9 @@ def main(argv=None):
     p.add_argument("--head-input", default="x_t", choices=["x_t", "x0_hat"], help="--task text: what the text head "
                    "reads, x_t (Alg. 2) or x0_hat (the denoiser's estimate of the clean sequence; not in the paper, "
                    "chapter 06 section 8)")
+    p.add_argument("--score", default="cosine", choices=["cosine", "contrastive"], help="--task text: the score "
+                   "that Alg. 2 climbs, the cosine of Eq. 10 or the text head's log-probability of the text against "
+                   "the training descriptions (not in the paper; chapter 06 section 10)")
     p.add_argument("--decoder-start", type=int, default=None, help="--task text: instead of Alg. 2, re-noise the "
                    "MotionCLIP-style decoder's sequence to this step and denoise it (not in the paper; chapter 06 "
                    "section 9 uses facelib.tasks.DECODER_START)")

@@ -9,7 +9,8 @@ The model is never changed: guidance is a function ``guide(x_hat, xt, t, out)`` 
   approximated by a few Adagrad steps started from x_hat_{t-1}.  score is log p_phi(y | x, t-1)
   for label control (Alg. 1) and cos(BiT(x, t-1), E(c)) for text control (Alg. 2, Eq. 10), or
   (not in the paper) cos(BiT(x0_hat(x, t-1), 0), E(c)), the head reading the denoiser's estimate of
-  the clean sequence (:func:`denoised_text_score`).
+  the clean sequence (:func:`denoised_text_score`), or (not in the paper) the head's log-probability
+  of c against the training descriptions, log p(c | x, t-1) (:func:`contrastive_text_score`).
   With sigma_t^2 the variance of p_theta, lambda log p_theta(x | x_t) = -lambda ||x - mu||^2 /
   (2 sigma_t^2) + const: a spring that holds x near the model's mean, stiffer at small t.
 * :class:`ReconstructionGuidance` (not in the paper; Ho et al. 2022, "video diffusion models", with
@@ -31,6 +32,9 @@ from .diffusion import GaussianDiffusion
 
 ADAGRAD_STEPS = 3  # paper §3.2: "3 steps of the Adagrad update for each diffusion step"
 GUIDANCE_WEIGHT = 0.01  # paper §4: lambda = 0.01 "as in [51]"
+# contrastive_text_score: how sharply a text is matched to the training descriptions (our choice: an
+# enriched sentence and its other order, at a cosine of about 0.985, get weights of about 0.95 and 0.05)
+MATCH_TEMPERATURE = 0.005
 
 
 def log_p_theta(x, out):
@@ -47,6 +51,65 @@ def classifier_score(classifier, labels):
 def text_score(head, text_embeddings):
     """score(x, t) = cos(BiT(x, t), E(c)) (B,) of the text head for text embeddings (B, D) (Eq. 10)."""
     return lambda x, t: head.cosine(x, t, text_embeddings.to(x.device))
+
+
+def nearest_wording(description_table, text_embeddings):
+    """For each text (B, D), the training descriptions in its nearest wording: (B, labels * 2, D).
+
+    description_table (labels, 2 orders, K wordings, D) holds E of every training description
+    (:func:`facelib.train.description_embeddings`; wording k is the k-th description of every
+    (label, order): the raw text, a paraphrase, an enriched template...).  The wording picked for a
+    text is the one holding the description nearest to it (cosine), so "from the neutral face to
+    happy" is contrasted with the 36 sentences of its template, "happy" with the 18 raw texts (each
+    twice: a raw text has no order)."""
+    table = torch.nn.functional.normalize(torch.as_tensor(description_table, dtype=torch.float32), dim=-1)
+    e = torch.nn.functional.normalize(torch.as_tensor(text_embeddings, dtype=torch.float32), dim=-1)
+    if table.ndim != 4 or e.ndim != 2 or table.shape[-1] != e.shape[-1]:
+        raise ValueError(f"need a description table (labels, 2, K, D) and text embeddings (B, D), got "
+                         f"{tuple(table.shape)} and {tuple(e.shape)}")
+    by_wording = table.permute(2, 0, 1, 3).flatten(1, 2)  # (K, labels * 2, D)
+    nearest = torch.einsum("bd,knd->bkn", e, by_wording).amax(-1).argmax(-1)  # (B,)
+    return by_wording[nearest]
+
+
+def match_log_weights(text_embeddings, references, match_temperature=MATCH_TEMPERATURE):
+    """log w_n, w_n = softmax_n cos(E(c), E(r_n)) / match_temperature (B, N): how a text (B, D)
+    matches its references (B, N, D), the w of :func:`contrastive_text_score`."""
+    _check_positive("the match temperature", match_temperature)
+    e = torch.nn.functional.normalize(torch.as_tensor(text_embeddings, dtype=torch.float32), dim=-1)
+    refs = torch.nn.functional.normalize(torch.as_tensor(references, dtype=torch.float32), dim=-1)
+    return torch.log_softmax(torch.einsum("bd,bnd->bn", e, refs) / match_temperature, -1)
+
+
+def contrastive_text_score(head, text_embeddings, references, temperature, match_temperature=MATCH_TEMPERATURE):
+    """score(x, t) = log sum_n w_n p(r_n | x, t) (B,): the text head's probability of the reference
+    descriptions r_n (B, N, D) that the text c matches (not in the paper; chapter 06 section 10).
+
+    * p(r_n | x, t) = softmax_n cos(BiT(x, t), E(r_n)) / tau: the head's InfoNCE softmax, with which it
+      is trained at this tau (facelib/train.py), over references such as :func:`nearest_wording`;
+    * w_n = softmax_n cos(E(c), E(r_n)) / match_temperature: what c means, as references.  A training
+      description matches itself (w is one-hot on it: the score is log p(c | x, t), Alg. 1's score
+      with the head as a classifier over descriptions); a phrasing never seen in training matches
+      the descriptions nearest to it in the encoder's space.
+
+    Why not the cosine of Eq. 10: its gradient is mostly the direction that every description of
+    the wording shares, and the order of an enriched sentence is a small angle next to it (chapter
+    06).  For a one-hot w, the gradient of log p(c | x, t) is (grad cos(o, E(c)) - E_p[grad cos(o, E(r))])
+    / tau: the shared part cancels, and what is left is the direction that tells c from the
+    references it is being confused with, the label while the label is wrong, the order once the
+    label is right."""
+    e = torch.nn.functional.normalize(torch.as_tensor(text_embeddings, dtype=torch.float32), dim=-1)
+    refs = torch.nn.functional.normalize(torch.as_tensor(references, dtype=torch.float32), dim=-1)
+    if refs.ndim != 3 or refs.shape[0] != e.shape[0] or refs.shape[-1] != e.shape[-1]:
+        raise ValueError(f"need references (B, N, D) for text embeddings (B, D) = {tuple(e.shape)}, "
+                         f"got {tuple(refs.shape)}")
+    _check_positive("the temperature", temperature)
+    log_w = match_log_weights(text_embeddings, references, match_temperature)
+
+    def score(x, t):
+        logits = torch.einsum("bd,bnd->bn", head.embed(x, t), refs.to(x.device)) / temperature
+        return torch.logsumexp(log_w.to(x.device) + torch.log_softmax(logits, -1), -1)
+    return score
 
 
 def denoised_text_score(head, model, diffusion, text_embeddings):

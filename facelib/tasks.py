@@ -19,7 +19,8 @@ from .diffusion import GaussianDiffusion, named_betas
 from .evaluation import check_class_names
 from .face.sequences import check_num_frames
 from .guidance import (GUIDANCE_WEIGHT, MeanShiftGuidance, OptimisationGuidance, ReconstructionGuidance,
-                       chain, classifier_score, denoised_text_score, text_score)
+                       chain, classifier_score, contrastive_text_score, denoised_text_score, nearest_wording,
+                       text_score)
 from .inpainting import KnownFrames, check_fill_input, keep_known
 from .models.denoiser import Denoiser, DenoiserConfig
 from .models.noisy_classifier import NoisyClassifier, NoisyClassifierConfig, NoisyTextHead, TextHeadConfig
@@ -44,6 +45,11 @@ TEXT_LR_REFERENCE_STEPS = 100
 # What the text head reads in Eq. 10: x_t itself (Alg. 2 as written) or the denoiser's estimate x0_hat
 # of the clean sequence (not in the paper: guidance.denoised_text_score, chapter 06 section 8)
 HEAD_INPUTS = ("x_t", "x0_hat")
+# The score that Alg. 2 climbs: the cosine of Eq. 10 (as written) or, not in the paper, the head's own
+# log-probability of the text against the training descriptions of its wording (guidance.
+# contrastive_text_score, chapter 06 section 10), whose lambda is the pick of that section's sweep
+TEXT_SCORES = ("cosine", "contrastive")
+CONTRASTIVE_GUIDANCE_WEIGHT = 0.0001
 # decoder_then_diffusion's re-noising step (not in the paper): our choice from chapter 06 section 9's sweep
 DECODER_START = 400
 
@@ -198,36 +204,54 @@ def _guided_sample(guide, denoiser, steps, n, num_frames, seed, progress, callba
     return denoiser.normalizer.denormalize(x.detach()).numpy()
 
 
-def text_control(text, n=8, dataset=TEXT_DATASET, num_frames=40, steps=None, guidance_weight=TEXT_GUIDANCE_WEIGHT,
-                 lr=None, head_input="x_t", seed=0, denoiser=None, head=None, encoder=None, progress=True,
-                 callback=None):
+def text_control(text, n=8, dataset=TEXT_DATASET, num_frames=40, steps=None, guidance_weight=None,
+                 lr=None, head_input="x_t", score="cosine", seed=0, denoiser=None, head=None, encoder=None,
+                 progress=True, callback=None):
     """Text control (Alg. 2): n sequences (n, F, 68, 3) float32 in mm that show what ``text`` says.
 
     text: a description ("disgust high smile", "from the neutral face to bareteeth"), or a list of
     n descriptions (one per sequence).  Each is embedded once by the offline sentence encoder
     E (facelib/text.py; empty, non-string or too long texts are refused); at every step 3 Adagrad
     steps maximise lambda log p_theta(x | x_t) + cos(BiT(x, t-1), E(c)) (Eq. 10), lambda =
-    ``guidance_weight`` (default TEXT_GUIDANCE_WEIGHT, not the paper's 0.01: the cosine's gradient is
-    small, and Adagrad's steps follow the sign of the sum; chapter 06), rate ``lr`` (default
-    :func:`text_lr`).  steps: None for the paper's T = 2000, or fewer (respaced).
+    ``guidance_weight`` (None: TEXT_GUIDANCE_WEIGHT for the cosine, not the paper's 0.01: the
+    cosine's gradient is small, and Adagrad's steps follow the sign of the sum; chapter 06), rate
+    ``lr`` (default :func:`text_lr`).  steps: None for the paper's T = 2000, or fewer (respaced).
+    score: "cosine" (Eq. 10) or "contrastive" (not in the paper: the head's log-probability of c
+    against the training descriptions in c's wording, :func:`~facelib.guidance.contrastive_text_score`,
+    at the head's training temperature; default lambda CONTRASTIVE_GUIDANCE_WEIGHT; chapter 06
+    section 10 measures that it steers the order of enriched texts, which the cosine cannot).
     head_input: "x_t" (Alg. 2: the head reads the candidate x_{t-1}) or "x0_hat" (not in the paper:
     it reads the denoiser's estimate of the clean sequence, :func:`~facelib.guidance.denoised_text_score`;
     twice the cost; chapter 06 section 8 measures that it does not fix the order of enriched texts).
     """
     from .text import get_encoder
+    from .train import description_embeddings
     if head_input not in HEAD_INPUTS:
         raise ValueError(f"head_input must be one of {HEAD_INPUTS}, got {head_input!r}")
+    if score not in TEXT_SCORES:
+        raise ValueError(f"score must be one of {TEXT_SCORES}, got {score!r}")
+    if score == "contrastive" and head_input != "x_t":
+        raise ValueError("the contrastive score reads x_t: use head_input='x_t' with score='contrastive'")
     texts, num_frames = _text_list(text, n), check_num_frames(num_frames)
-    embeddings = torch.as_tensor((encoder or get_encoder()).encode(texts))
+    encoder = encoder or get_encoder()
+    embeddings = torch.as_tensor(encoder.encode(texts))
     head = head or load_text_head(dataset)
     if head.classifier_type != "text":
         raise ValueError("text control needs a text head (load_text_head), not a label classifier")
     denoiser = denoiser or load_denoiser(f"denoiser_{head.dataset}")
-    score = (text_score(head.model, embeddings) if head_input == "x_t" else
-             denoised_text_score(head.model, denoiser.model, denoiser.diffusion, embeddings))
+    if score == "contrastive":
+        table = description_embeddings(data.load_dataset(head.dataset, "train"), encoder)
+        fn = contrastive_text_score(head.model, embeddings, nearest_wording(table, embeddings),
+                                    head.meta["training"]["temperature"])
+    elif head_input == "x_t":
+        fn = text_score(head.model, embeddings)
+    else:
+        fn = denoised_text_score(head.model, denoiser.model, denoiser.diffusion, embeddings)
+    if guidance_weight is None:
+        guidance_weight = CONTRASTIVE_GUIDANCE_WEIGHT if score == "contrastive" else TEXT_GUIDANCE_WEIGHT
     lr = text_lr(steps, head.meta["training"]["num_diffusion_steps"]) if lr is None else lr
     return _guided_sample(head, denoiser, steps, n, num_frames, seed, progress, callback,
-                          lambda diffusion: OptimisationGuidance(score, diffusion, guidance_weight, lr))
+                          lambda diffusion: OptimisationGuidance(fn, diffusion, guidance_weight, lr))
 
 
 def _text_list(text, n):

@@ -6,9 +6,11 @@ import numpy as np
 import pytest
 import torch
 
-from facelib import baselines, config, data, descriptions, evaluation, tasks, text
+from facelib import baselines, config, data, descriptions, evaluation, guidance, tasks, text
+from facelib.train import description_embeddings
 from facelib.diffusion import GaussianDiffusion, linear_betas
-from facelib.guidance import OptimisationGuidance, denoised_text_score, text_score
+from facelib.guidance import (OptimisationGuidance, contrastive_text_score, denoised_text_score, nearest_wording,
+                              text_score)
 from facelib.models.noisy_classifier import NoisyTextHead, TextHeadConfig
 
 
@@ -117,6 +119,79 @@ def test_text_control_reading_x0_hat_is_deterministic_and_checked(head, denoiser
         tasks.text_control("sad", 1, head_input="x0", **kwargs)
 
 
+@pytest.fixture(scope="module")
+def description_table():
+    return description_embeddings(data.load_dataset("coma+bu", "train"), text.get_encoder())
+
+
+def test_nearest_wording_contrasts_a_text_with_its_own_template(description_table):
+    encoder = text.get_encoder()
+    train = data.load_dataset("coma+bu", "train")
+    texts = ["from the neutral face to happy", "happy", "a neutral face turning into a big smile"]
+    refs = nearest_wording(description_table, encoder.encode(texts))
+    assert refs.shape == (3, 36, 384)
+    template = [descriptions.enriched_texts(y, k)[0] for y in train.label_names for k in train.kind_names]
+    torch.testing.assert_close(refs[0], torch.as_tensor(encoder.encode(template)))  # all 36, the text among them
+    raw = [descriptions.raw_text(y) for y in train.label_names for _ in train.kind_names]  # a raw text has no order
+    torch.testing.assert_close(refs[1], torch.as_tensor(encoder.encode(raw)))
+    assert torch.isclose(refs[2] @ torch.as_tensor(encoder.encode(texts[2:]))[0], torch.tensor(1.0)).any()
+    with pytest.raises(ValueError, match="description table"):
+        nearest_wording(description_table[0], encoder.encode(texts))
+
+
+def test_contrastive_score_is_the_heads_log_probability_of_the_matched_descriptions(head, description_table):
+    # score = log sum_n w_n p(r_n | x, t), p = the head's InfoNCE softmax over the references, w = the
+    # text's match to them; when c = r_j and the match is sharp it is log p(r_j | x, t), a log-softmax
+    # (the probabilities over the references sum to 1)
+    encoder = text.get_encoder()
+    refs = nearest_wording(description_table, encoder.encode(["from the neutral face to sad"]))[0]
+    x = torch.randn(1, 40, 68, 3, generator=torch.Generator().manual_seed(6)).expand(36, -1, -1, -1)
+    t = torch.full((36,), 400.0)
+    tau = head.meta["training"]["temperature"]
+    with torch.no_grad():
+        p = torch.softmax(head.model.embed(x[:1], t[:1]) @ refs.T / tau, -1)[0]
+        log_p = contrastive_text_score(head.model, refs, refs.expand(36, -1, -1), tau, match_temperature=1e-4)(x, t)
+        torch.testing.assert_close(log_p, p.log(), atol=1e-5, rtol=1e-5)
+        assert torch.logsumexp(log_p, 0).abs() < 1e-5
+        held_out = torch.as_tensor(encoder.encode(["starting neutral and ending with a sad face"]))
+        w = torch.softmax(held_out @ refs.T / guidance.MATCH_TEMPERATURE, -1)[0]
+        got = contrastive_text_score(head.model, held_out, refs[None], tau)(x[:1], t[:1])
+        torch.testing.assert_close(got, (w * p).sum().log()[None], atol=1e-5, rtol=1e-5)
+    diffusion = GaussianDiffusion(linear_betas(2000))
+    out = {"mean": x[:4] * 0.99, "variance": torch.full((4, 1, 1, 1), 0.02)}
+    four = contrastive_text_score(head.model, refs[:4], refs.expand(4, -1, -1), tau)
+    guided = OptimisationGuidance(four, diffusion, guidance_weight=0.0, lr=0.01)(out["mean"], x[:4], 401, out)
+    with torch.no_grad():
+        assert (four(guided, t[:4]) > four(out["mean"], t[:4])).all()
+    for bad_refs, bad_tau, bad_match in ((refs, tau, 0.01), (refs.expand(36, -1, -1), 0.0, 0.01),
+                                         (refs.expand(36, -1, -1), tau, -1.0)):
+        with pytest.raises(ValueError, match="references|temperature"):
+            contrastive_text_score(head.model, refs, bad_refs, bad_tau, bad_match)
+
+
+def test_contrastive_score_steers_the_order_that_the_cosine_cannot(head, denoiser):
+    # chapter 06 section 10: on enriched sentences of both orders, the type-S IC's probability of the
+    # requested order is far higher when Alg. 2 climbs log p(c | x) than when it climbs the cosine
+    ev = evaluation.load_evaluator("coma+bu", "S")
+    pairs = [(y, k) for y in ("happy", "surprise", "mouth_open", "bareteeth", "sad", "eyebrow") for k in ("N2E", "E2N")]
+    texts = [descriptions.enriched_texts(y, k)[0] for y, k in pairs]
+    order = np.array([1 if k == "E2N" else 0 for _, k in pairs])
+    kwargs = dict(steps=30, seed=3, head=head, denoiser=denoiser, progress=False)
+    p_order = {}
+    for score in tasks.TEXT_SCORES:
+        x = tasks.text_control(texts, len(texts), score=score, **kwargs)
+        p = torch.softmax(torch.as_tensor(ev.features(x)), 1).numpy().reshape(len(x), -1, 2).sum(1)
+        p_order[score] = p[np.arange(len(x)), order]
+    assert p_order["contrastive"].mean() > p_order["cosine"].mean() + 0.2
+    assert p_order["contrastive"][order == 1].mean() > 0.5 and p_order["contrastive"][order == 0].mean() > 0.5
+    a = tasks.text_control(texts[:2], 2, score="contrastive", **kwargs)
+    assert np.array_equal(a, tasks.text_control(texts[:2], 2, score="contrastive", **kwargs))
+    with pytest.raises(ValueError, match="score must be one of"):
+        tasks.text_control("sad", 1, score="dot", **kwargs)
+    with pytest.raises(ValueError, match="reads x_t"):
+        tasks.text_control("sad", 1, score="contrastive", head_input="x0_hat", **kwargs)
+
+
 def test_decoder_then_diffusion_trades_fidelity_for_diversity(denoiser):
     # SDEdit from the MotionCLIP-style decoder: deterministic for a seed, different draws for one text,
     # nearer the decoded sequence when re-noised to a smaller step
@@ -223,12 +298,16 @@ def test_cli_text_task_writes_npz(tmp_path, capsys):
     assert main(["sample", "--task", "text", "--text", "from sad to the neutral face", "--n", "1", "--steps", "3",
                  "--head-input", "x0_hat", "--out", str(out)]) == 0
     assert json.loads(str(np.load(out)["config"]))["head_input"] == "x0_hat"
+    assert main(["sample", "--task", "text", "--text", "from sad to the neutral face", "--n", "1", "--steps", "3",
+                 "--score", "contrastive", "--out", str(out)]) == 0
+    config = json.loads(str(np.load(out)["config"]))
+    assert config["score"] == "contrastive" and config["guidance_weight"] == tasks.CONTRASTIVE_GUIDANCE_WEIGHT
     assert main(["sample", "--task", "text", "--text", "from sad to the neutral face", "--n", "2", "--steps", "20",
                  "--decoder-start", "400", "--out", str(out)]) == 0
     config = json.loads(str(np.load(out)["config"]))
     assert config["method"] == "decoder_then_diffusion" and config["decoder_start"] == 400
     assert np.load(out)["landmarks"].shape == (2, 40, 68, 3)
-    for extra in (["--lr", "0.1"], ["--head-input", "x0_hat"]):  # options of Alg. 2 that the decoder route would ignore
+    for extra in (["--lr", "0.1"], ["--head-input", "x0_hat"], ["--score", "contrastive"]):  # options of Alg. 2 that the decoder route would ignore
         with pytest.raises(SystemExit):
             main(["sample", "--task", "text", "--text", "sad", "--n", "1", "--steps", "5", "--decoder-start", "400",
                   *extra, "--out", str(out)])
