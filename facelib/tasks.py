@@ -216,8 +216,8 @@ def text_control(text, n=8, dataset=TEXT_DATASET, num_frames=40, steps=None, gui
     ``guidance_weight`` (None: TEXT_GUIDANCE_WEIGHT for the cosine, not the paper's 0.01: the
     cosine's gradient is small, and Adagrad's steps follow the sign of the sum; chapter 06), rate
     ``lr`` (default :func:`text_lr`).  steps: None for the paper's T = 2000, or fewer (respaced).
-    score: "cosine" (Eq. 10) or "contrastive" (not in the paper: the head's log-probability of c
-    against the training descriptions in c's wording, :func:`~facelib.guidance.contrastive_text_score`,
+    score: "cosine" (Eq. 10) or "contrastive" (not in the paper: the head's log-probability of the
+    training descriptions that c matches, in c's nearest wording, :func:`~facelib.guidance.contrastive_text_score`,
     at the head's training temperature; default lambda CONTRASTIVE_GUIDANCE_WEIGHT; chapter 06
     section 10 measures that it steers the order of enriched texts, which the cosine cannot).
     head_input: "x_t" (Alg. 2: the head reads the candidate x_{t-1}) or "x0_hat" (not in the paper:
