@@ -78,7 +78,7 @@ def main():
                                head=head, denoiser=denoiser, encoder=encoder, progress=False)
         dt = time.perf_counter() - t0
         s = ev.score(x, targets)
-        name = f"ours, {score}, reads {head_input}"
+        name = f"ours, {score}, {head_input}"
         print(f"{name:<26}{steps:>6}{dt:>10.1f}{1e3 * dt / steps:>9.1f}{s['accuracy']:>8.1f}"
               f"{s['fid']:>8.2f}{lr:>8.3g}", flush=True)
 
