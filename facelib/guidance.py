@@ -10,7 +10,7 @@ The model is never changed: guidance is a function ``guide(x_hat, xt, t, out)`` 
   for label control (Alg. 1) and cos(BiT(x, t-1), E(c)) for text control (Alg. 2, Eq. 10), or
   (not in the paper) cos(BiT(x0_hat(x, t-1), 0), E(c)), the head reading the denoiser's estimate of
   the clean sequence (:func:`denoised_text_score`), or (not in the paper) the head's log-probability
-  of c against the training descriptions, log p(c | x, t-1) (:func:`contrastive_text_score`).
+  of the training descriptions that c matches, log sum_n w_n p(r_n | x, t-1) (:func:`contrastive_text_score`).
   With sigma_t^2 the variance of p_theta, lambda log p_theta(x | x_t) = -lambda ||x - mu||^2 /
   (2 sigma_t^2) + const: a spring that holds x near the model's mean, stiffer at small t.
 * :class:`ReconstructionGuidance` (not in the paper; Ho et al. 2022, "video diffusion models", with
@@ -98,10 +98,10 @@ def contrastive_text_score(head, text_embeddings, references, temperature, match
     / tau: the shared part cancels, and what is left is the direction that tells c from the
     references it is being confused with, the label while the label is wrong, the order once the
     label is right."""
-    e = torch.nn.functional.normalize(torch.as_tensor(text_embeddings, dtype=torch.float32), dim=-1)
+    shape = torch.as_tensor(text_embeddings).shape
     refs = torch.nn.functional.normalize(torch.as_tensor(references, dtype=torch.float32), dim=-1)
-    if refs.ndim != 3 or refs.shape[0] != e.shape[0] or refs.shape[-1] != e.shape[-1]:
-        raise ValueError(f"need references (B, N, D) for text embeddings (B, D) = {tuple(e.shape)}, "
+    if len(shape) != 2 or refs.ndim != 3 or refs.shape[0] != shape[0] or refs.shape[-1] != shape[-1]:
+        raise ValueError(f"need references (B, N, D) for text embeddings (B, D) = {tuple(shape)}, "
                          f"got {tuple(refs.shape)}")
     _check_positive("the temperature", temperature)
     log_w = match_log_weights(text_embeddings, references, match_temperature)
