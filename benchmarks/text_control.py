@@ -2,6 +2,7 @@
 
 Usage: python benchmarks/text_control.py [--n 64] [--steps 2000 200 100] [--lr R] [--enriched]
                                          [--head-input x_t x0_hat] [--score cosine contrastive]
+                                         [--particles 1 4]
 The n sequences cycle through the raw texts of the 18 labels of "coma+bu" (the raw-text task of
 §5.2, type-I IC), or with --enriched through the enriched sentences of the 36 (label, order) classes
 ("from the neutral face to X" / "from X to the neutral face", type-S IC).  For each number of reverse
@@ -11,7 +12,8 @@ compare rows with each other, not with tables computed from another n), and the 
 (default: tasks.text_lr, scaled with the number of steps; --lr fixes it).  --head-input lists what
 the text head reads (x_t: Alg. 2; x0_hat: the denoiser's estimate, chapter 06 section 8), --score
 the score Alg. 2 climbs (cosine: Eq. 10; contrastive: the head's log-probability of the text,
-chapter 06 section 10; it reads x_t only, so it is run with x_t).  The lambda is text_control's
+chapter 06 section 10; it reads x_t only, so it is run with x_t), --particles the numbers K of
+best-of-K chains (chapter 06 section 11).  The lambda is text_control's
 default for each score.  Also
 timed: the MotionCLIP-style baseline (one decoder pass) and decoder + DDPM (not in the paper,
 chapter 06 section 9: the baseline's sequence re-noised to tasks.DECODER_START and denoised).
@@ -37,6 +39,8 @@ def main():
     parser.add_argument("--enriched", action="store_true", help="the enriched-text task (type-S IC)")
     parser.add_argument("--head-input", nargs="+", default=["x_t"], choices=list(tasks.HEAD_INPUTS))
     parser.add_argument("--score", nargs="+", default=["cosine"], choices=list(tasks.TEXT_SCORES))
+    parser.add_argument("--particles", type=int, nargs="+", default=[1],
+                        help="best-of-K (chapter 06 section 11; K > 1 runs with max_time = tasks.PARTICLE_MAX_TIME)")
     args = parser.parse_args()
     kind = "S" if args.enriched else "I"
     ev = evaluation.load_evaluator(DATASET, kind)
@@ -48,7 +52,7 @@ def main():
     encoder.encode(texts)  # load the encoder once, outside the timings
     task = "enriched (IC S)" if args.enriched else "raw (IC I)"
     print(f"cores: {os.cpu_count()}, torch threads: {torch.get_num_threads()}, dataset: {DATASET}, "
-          f"n = {args.n}, lambda {tasks.TEXT_GUIDANCE_WEIGHT} (cosine) / {tasks.CONTRASTIVE_GUIDANCE_WEIGHT} "
+          f"n = {args.n}, lambda {tasks.text_guidance_weight('cosine')} (cosine) / {tasks.text_guidance_weight('contrastive')} "
           f"(contrastive), task {task}")
     print(f"{'method':<26}{'steps':>6}{'seconds':>10}{'ms/step':>9}{'Acc %':>8}{'FID':>8}{'lr':>8}")
     test = data.load_dataset(DATASET, "test")
@@ -69,16 +73,17 @@ def main():
         s = ev.score(x, targets)
         print(f"{f'decoder + DDPM (t0={tasks.DECODER_START})':<26}{steps:>6}{dt:>10.1f}{'':>9}"
               f"{s['accuracy']:>8.1f}{s['fid']:>8.2f}", flush=True)
-    for steps, head_input, score in itertools.product(args.steps, args.head_input, args.score):
+    for steps, head_input, score, k in itertools.product(args.steps, args.head_input, args.score, args.particles):
         if score == "contrastive" and head_input != "x_t":
             continue  # the contrastive score reads x_t only
-        lr = tasks.text_lr(steps) if args.lr is None else args.lr
+        lr = tasks.text_lr(steps, score=score) if args.lr is None else args.lr
         t0 = time.perf_counter()
-        x = tasks.text_control(texts, args.n, steps=steps, lr=lr, head_input=head_input, score=score, seed=0,
-                               head=head, denoiser=denoiser, encoder=encoder, progress=False)
+        x = tasks.text_control(texts, args.n, steps=steps, lr=lr, head_input=head_input, score=score, particles=k,
+                               max_time=tasks.PARTICLE_MAX_TIME if k > 1 else None, seed=0, head=head,
+                               denoiser=denoiser, encoder=encoder, progress=False)
         dt = time.perf_counter() - t0
         s = ev.score(x, targets)
-        name = f"ours, {score}, {head_input}"
+        name = f"ours, {score}, {head_input}" + (f", K={k}" if k > 1 else "")
         print(f"{name:<26}{steps:>6}{dt:>10.1f}{1e3 * dt / steps:>9.1f}{s['accuracy']:>8.1f}"
               f"{s['fid']:>8.2f}{lr:>8.3g}", flush=True)
 

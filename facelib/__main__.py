@@ -104,9 +104,12 @@ def _sample(args):
     if args.task == "text" and args.text is None:
         raise ValueError('--task text needs --text (e.g. --text "disgust high smile")')
     if args.decoder_start is not None and (args.task != "text" or args.lr is not None or args.guidance_weight is not None
-                                           or args.head_input != "x_t" or args.score != "cosine"):
+                                           or args.head_input != "x_t" or args.score != "cosine"
+                                           or args.particles != 1 or args.max_time is not None):
         raise ValueError("--decoder-start belongs to --task text and replaces Alg. 2's guidance: it takes no --lr, "
-                         "--guidance-weight, --head-input or --score")
+                         "--guidance-weight, --head-input, --score, --particles or --max-time")
+    if (args.particles != 1 or args.max_time is not None) and args.task != "text":
+        raise ValueError("--particles and --max-time belong to --task text")
     dataset = args.dataset or (tasks.TEXT_DATASET if args.task == "text" else "coma")
     denoiser = tasks.load_denoiser(args.checkpoint or f"denoiser_{dataset}")
     used = {"task": args.task, "n": args.n, "length": args.length, "seed": args.seed,
@@ -115,10 +118,9 @@ def _sample(args):
     extra = {}
     lr = args.lr  # None: the task's default Adagrad rate (Alg. 1, 2 and 4)
     if lr is None and args.task in ("text", "geometry", "label"):
-        lr = (tasks.text_lr(args.steps) if args.task == "text" else tasks.GEOMETRY_LR if args.task == "geometry"
+        lr = (tasks.text_lr(args.steps, score=args.score) if args.task == "text" else tasks.GEOMETRY_LR if args.task == "geometry"
               else tasks.adagrad_lr(dataset, args.steps))
-    text_weight = tasks.CONTRASTIVE_GUIDANCE_WEIGHT if args.score == "contrastive" else tasks.TEXT_GUIDANCE_WEIGHT
-    weight = ((text_weight if args.task == "text" else guidance.GUIDANCE_WEIGHT)
+    weight = ((tasks.text_guidance_weight(args.score) if args.task == "text" else guidance.GUIDANCE_WEIGHT)
               if args.guidance_weight is None else args.guidance_weight)
     if args.task == "unconditional":
         landmarks = tasks.unconditional(args.n, num_frames=args.length, seed=args.seed, steps=args.steps,
@@ -133,10 +135,12 @@ def _sample(args):
     elif args.task == "text":
         landmarks = tasks.text_control(args.text, args.n, dataset=dataset, num_frames=args.length, steps=args.steps,
                                        guidance_weight=weight, lr=lr, head_input=args.head_input, score=args.score,
-                                       seed=args.seed, denoiser=denoiser)
+                                       particles=args.particles, max_time=args.max_time, seed=args.seed,
+                                       denoiser=denoiser)
         used.update(dataset=dataset, text=args.text, method="alg2", guidance_weight=weight, adagrad_lr=lr,
                     head_input=args.head_input, score=args.score, adagrad_steps=guidance.ADAGRAD_STEPS,
-                    text_head=f"guide_{dataset}_text")
+                    particles=args.particles, select_time=tasks.SELECT_TIME if args.particles > 1 else None,
+                    max_time=args.max_time, text_head=f"guide_{dataset}_text")
         extra["texts"] = np.array([args.text] * args.n)
     elif args.task == "fill":
         if args.input is None or args.known is None:
@@ -251,7 +255,7 @@ def main(argv=None):
     p.add_argument("--text", default=None, help='--task text: what to show, e.g. "disgust high smile" or '
                    '"from the neutral face to bareteeth"')
     p.add_argument("--guidance-weight", type=float, default=None, help="lambda of Alg. 1-2 (default: the paper's 0.01; "
-                   "tasks.TEXT_GUIDANCE_WEIGHT for --task text, chapter 06)")
+                   "tasks.text_guidance_weight(score) for --task text, chapter 06)")
     p.add_argument("--lr", type=float, default=None, help="Adagrad learning rate of Alg. 1, 2 and 4 "
                    "(default: the book's choice for the task and the number of steps)")
     p.add_argument("--head-input", default="x_t", choices=["x_t", "x0_hat"], help="--task text: what the text head "
@@ -260,6 +264,11 @@ def main(argv=None):
     p.add_argument("--score", default="cosine", choices=["cosine", "contrastive"], help="--task text: the score "
                    "that Alg. 2 climbs, the cosine of Eq. 10 or the text head's log-probability of the text against "
                    "the training descriptions (not in the paper; chapter 06 section 10)")
+    p.add_argument("--particles", type=int, default=1, help="--task text: best-of-K, K guided chains per sequence "
+                   "until the time label tasks.SELECT_TIME, where the text head keeps one (not in the paper; chapter 06 "
+                   "section 11; default 1)")
+    p.add_argument("--max-time", type=float, default=None, help="--task text: leave the steps above this time label "
+                   "unguided (not in the paper; chapter 06 section 11 uses tasks.PARTICLE_MAX_TIME; default: guide all)")
     p.add_argument("--decoder-start", type=int, default=None, help="--task text: instead of Alg. 2, re-noise the "
                    "MotionCLIP-style decoder's sequence to this step and denoise it (not in the paper; chapter 06 "
                    "section 9 uses facelib.tasks.DECODER_START)")

@@ -149,7 +149,7 @@ class GaussianDiffusion:
         return x, out
 
     def sample(self, model, shape, seed=0, x_T=None, mask=None, guide=None, callback=None, progress=True,
-               start_step=None, resample=1):
+               start_step=None, resample=1, end_step=0, generator=None):
         """Run the reverse chain from x_T ~ N(0, I) down to x_0 and return x_0.
 
         shape: (batch, frames, 68, 3).  callback(t, x_{t-1}, out) is called after every step
@@ -158,18 +158,24 @@ class GaussianDiffusion:
         resample: RePaint's resampling (Lugmayr et al. 2022, jump length 1): every step t > 1 is run
         ``resample`` times, x_{t-1} being re-noised back to x_t ~ q(x_t | x_{t-1}) (Eq. 2) in between,
         so that conditioned parts (the known frames of Alg. 3) and generated parts can harmonise.
+        end_step: stop at x_k for a step k > 0 instead and return it (to pick among chains half-way,
+        :func:`facelib.tasks.text_control`'s particles; start_step=k continues them).
+        generator: a torch.Generator to draw from instead of a fresh one seeded with ``seed`` (so that a
+        chain stopped at end_step continues with the rest of its random stream).
         """
         if isinstance(resample, bool) or not isinstance(resample, (int, np.integer)) or resample < 1:
             raise ValueError(f"resample must be a positive integer, got {resample!r}")
         start_step = self.num_steps if start_step is None else start_step
         if not 1 <= start_step <= self.num_steps:
             raise ValueError(f"start_step must be in 1..{self.num_steps}, got {start_step}")
-        generator = torch.Generator().manual_seed(seed)
+        if isinstance(end_step, bool) or not isinstance(end_step, (int, np.integer)) or not 0 <= end_step < start_step:
+            raise ValueError(f"end_step must be an integer in 0..{start_step - 1} (below start_step), got {end_step!r}")
+        generator = torch.Generator().manual_seed(seed) if generator is None else generator
         device = next(model.parameters()).device if hasattr(model, "parameters") else torch.device("cpu")
         x = torch.randn(shape, generator=generator).to(device) if x_T is None else x_T.to(device)
         if mask is not None:
             x = x * mask[:, :, None, None]
-        for t in tqdm(range(start_step, 0, -1), desc="sampling", disable=not progress, leave=False):
+        for t in tqdm(range(start_step, end_step, -1), desc="sampling", disable=not progress, leave=False):
             for r in range(resample if t > 1 else 1):
                 if r > 0:
                     x = self.q_step(x, t, generator)

@@ -17,6 +17,8 @@ The model is never changed: guidance is a function ``guide(x_hat, xt, t, out)`` 
   the normalised step of Chung et al. 2023, DPS): pull x_{t-1} along -grad_{x_t} ||x_0_hat(x_t)|S_K -
   x_0|S_K||, so that the *unknown* frames agree with known ones (the remedy of chapter 08 for
   Alg. 4's disharmony).
+* :func:`best_particles` (not in the paper): of several guided chains per sequence, keep the one
+  the guide scores highest at a chosen step, a one-step particle filter (chapter 06 section 11).
 * :class:`MeanShiftGuidance`, the classic classifier guidance (Sohl-Dickstein et al.; Dhariwal
   & Nichol 2021, Alg. 1): x_{t-1} ~ N(mu + s sigma_t^2 grad_{x_t} log p_phi(y | x_t, t), sigma_t^2 I).
   Paper §3.2 writes the shift with grad p_phi; the correct form has grad log p_phi.
@@ -147,25 +149,33 @@ def _check_positive(name, value, allow_zero=False):
 @dataclass
 class OptimisationGuidance:
     """Alg. 1 line 10: ``num_steps`` Adagrad steps (a fresh optimiser at every diffusion step)
-    maximising guidance_weight * log p_theta(x | x_t) + score(x, t-1), started from x_hat_{t-1}."""
+    maximising guidance_weight * log p_theta(x | x_t) + score(x, t-1), started from x_hat_{t-1}.
+
+    max_time (not in the paper): leave the steps whose time label t is above it unguided, where the
+    guide reads nothing but noise (None: guide every step, as Alg. 1 and 2 do)."""
 
     score: Callable
     diffusion: GaussianDiffusion
     guidance_weight: float = GUIDANCE_WEIGHT
     lr: float = 0.01
     num_steps: int = ADAGRAD_STEPS
+    max_time: float | None = None
 
     def __post_init__(self):
         _check_positive("guidance_weight (lambda)", self.guidance_weight, allow_zero=True)
         _check_positive("the Adagrad learning rate", self.lr)
         if not isinstance(self.num_steps, int) or self.num_steps < 1:
             raise ValueError(f"num_steps must be a positive integer, got {self.num_steps!r}")
+        if self.max_time is not None:
+            _check_positive("max_time", self.max_time)
 
     def objective(self, x, out, t_prev):
         """lambda log p_theta(x | x_t) + score(x, t-1), per sequence (B,)."""
         return self.guidance_weight * log_p_theta(x, out) + self.score(x, t_prev)
 
     def __call__(self, x_hat, xt, t, out):
+        if self.max_time is not None and float(self.diffusion.timesteps[t]) > self.max_time:
+            return x_hat
         t_prev = self.diffusion.model_time(t - 1, len(x_hat)).to(x_hat.device)
         x = x_hat.detach().clone().requires_grad_(True)
         opt = torch.optim.Adagrad([x], lr=self.lr)
@@ -221,6 +231,23 @@ class ReconstructionGuidance:
 
     def __call__(self, x_hat, xt, t, out):
         return x_hat - self.scale * gradient_at(xt, lambda x: self.known_error(x, t))
+
+
+def best_particles(x, score, t, particles):
+    """Best-of-K (not in the paper; chapter 06 section 11): x holds ``particles`` candidates of each
+    of n sequences, particle-major ((particles * n, ...): candidate j of sequence i at j * n + i);
+    returns (n, ...), for each sequence the candidate with the highest score(x, t) (B,).
+
+    A one-step form of sequential Monte Carlo (particle filtering) with the guide as the potential:
+    the chains are picked where the guide can read what the chain is committing to."""
+    if isinstance(particles, bool) or not isinstance(particles, int) or particles < 1 or len(x) % particles:
+        raise ValueError(f"particles must be a positive integer dividing the batch {len(x)}, got {particles!r}")
+    n = len(x) // particles
+    with torch.no_grad():
+        s = score(x, t).reshape(particles, n)
+    if not torch.isfinite(s).all():
+        raise ValueError("the score of a particle is not finite")
+    return x.reshape(particles, n, *x.shape[1:])[s.argmax(0), torch.arange(n)]
 
 
 def chain(*guides):

@@ -19,7 +19,7 @@ from .diffusion import GaussianDiffusion, named_betas
 from .evaluation import check_class_names
 from .face.sequences import check_num_frames
 from .guidance import (GUIDANCE_WEIGHT, MeanShiftGuidance, OptimisationGuidance, ReconstructionGuidance,
-                       chain, classifier_score, contrastive_text_score, denoised_text_score, nearest_wording,
+                       best_particles, chain, classifier_score, contrastive_text_score, denoised_text_score, nearest_wording,
                        text_score)
 from .inpainting import KnownFrames, check_fill_input, keep_known
 from .models.denoiser import Denoiser, DenoiserConfig
@@ -49,7 +49,15 @@ HEAD_INPUTS = ("x_t", "x0_hat")
 # log-probability of the text against the training descriptions of its wording (guidance.
 # contrastive_text_score, chapter 06 section 10), whose lambda is the pick of that section's sweep
 TEXT_SCORES = ("cosine", "contrastive")
-CONTRASTIVE_GUIDANCE_WEIGHT = 0.0001
+# The contrastive score's lambda (the paper's 0.01) and Adagrad rate at TEXT_LR_REFERENCE_STEPS steps: the
+# pick of chapter 06 section 10's sweep (72 sequences, two seeds, best Acc - 2 FID summed over both tasks)
+CONTRASTIVE_GUIDANCE_WEIGHT = 0.01
+CONTRASTIVE_LR = 0.042
+# Best-of-K particles (not in the paper; chapter 06 section 11): the time label at which the K guided chains
+# of each text are compared by the text head, and the time above which they are left unguided (the head
+# reads nothing there); our choices from that section's measurements
+SELECT_TIME = 600
+PARTICLE_MAX_TIME = 1400
 # decoder_then_diffusion's re-noising step (not in the paper): our choice from chapter 06 section 9's sweep
 DECODER_START = 400
 
@@ -160,10 +168,22 @@ def adagrad_lr(dataset, steps=None, num_steps=2000):
     return step_scaled_lr(ADAGRAD_LR[dataset], LR_REFERENCE_STEPS, steps, num_steps)
 
 
-def text_lr(steps=None, num_steps=2000):
+def text_lr(steps=None, num_steps=2000, score="cosine"):
     """The default Adagrad rate of text control (Alg. 2) for a chain of ``steps`` reverse steps
-    (None: T): TEXT_LR, chosen at 100 steps, through :func:`step_scaled_lr` with power 1."""
-    return step_scaled_lr(TEXT_LR, TEXT_LR_REFERENCE_STEPS, steps, num_steps, power=1.0)
+    (None: T): TEXT_LR (CONTRASTIVE_LR for the contrastive score), chosen at 100 steps, through
+    :func:`step_scaled_lr` with power 1."""
+    if score not in TEXT_SCORES:
+        raise ValueError(f"score must be one of {TEXT_SCORES}, got {score!r}")
+    rate = CONTRASTIVE_LR if score == "contrastive" else TEXT_LR
+    return step_scaled_lr(rate, TEXT_LR_REFERENCE_STEPS, steps, num_steps, power=1.0)
+
+
+def text_guidance_weight(score="cosine"):
+    """The default lambda of text control for a score: TEXT_GUIDANCE_WEIGHT (cosine) or
+    CONTRASTIVE_GUIDANCE_WEIGHT (contrastive)."""
+    if score not in TEXT_SCORES:
+        raise ValueError(f"score must be one of {TEXT_SCORES}, got {score!r}")
+    return CONTRASTIVE_GUIDANCE_WEIGHT if score == "contrastive" else TEXT_GUIDANCE_WEIGHT
 
 
 def label_control(label, n=16, dataset="coma", num_frames=40, steps=None, guidance_weight=GUIDANCE_WEIGHT,
@@ -204,9 +224,32 @@ def _guided_sample(guide, denoiser, steps, n, num_frames, seed, progress, callba
     return denoiser.normalizer.denormalize(x.detach()).numpy()
 
 
+def _best_of_particles(guide, denoiser, steps, n, num_frames, seed, progress, make_guidance, score, particles,
+                       select_time):
+    """Best-of-K (not in the paper; chapter 06 section 11): ``particles`` guided chains per sequence
+    (make_guidance(diffusion, repeat) for a batch of repeat * n) down to the step nearest the time label
+    ``select_time``; for each sequence the chain with the highest score(repeat) there continues alone
+    (:func:`~facelib.guidance.best_particles`), on the rest of the same random stream."""
+    denoiser = denoiser or load_denoiser(f"denoiser_{guide.dataset}")
+    check_same_space(denoiser, guide)
+    diffusion = denoiser.diffusion_with(steps)
+    k = max(1, int(np.argmin(np.abs(diffusion.timesteps - select_time))))
+    if k >= diffusion.num_steps:
+        raise ValueError(f"select_time {select_time} is the chain's first step: pick one below "
+                         f"{diffusion.timesteps[-1]}")
+    generator = torch.Generator().manual_seed(seed)
+    shape = (particles * n, num_frames, 68, 3)
+    x = diffusion.sample(denoiser.model, shape, guide=make_guidance(diffusion, particles), progress=progress,
+                         end_step=k, generator=generator)
+    x = best_particles(x, score(particles), diffusion.model_time(k, len(x)).to(x.device), particles)
+    x = diffusion.sample(denoiser.model, x.shape, x_T=x, start_step=k, guide=make_guidance(diffusion, 1),
+                         progress=progress, generator=generator)
+    return denoiser.normalizer.denormalize(x.detach()).numpy()
+
+
 def text_control(text, n=8, dataset=TEXT_DATASET, num_frames=40, steps=None, guidance_weight=None,
-                 lr=None, head_input="x_t", score="cosine", seed=0, denoiser=None, head=None, encoder=None,
-                 progress=True, callback=None):
+                 lr=None, head_input="x_t", score="cosine", particles=1, select_time=SELECT_TIME, max_time=None,
+                 seed=0, denoiser=None, head=None, encoder=None, progress=True, callback=None):
     """Text control (Alg. 2): n sequences (n, F, 68, 3) float32 in mm that show what ``text`` says.
 
     text: a description ("disgust high smile", "from the neutral face to bareteeth"), or a list of
@@ -218,11 +261,16 @@ def text_control(text, n=8, dataset=TEXT_DATASET, num_frames=40, steps=None, gui
     ``lr`` (default :func:`text_lr`).  steps: None for the paper's T = 2000, or fewer (respaced).
     score: "cosine" (Eq. 10) or "contrastive" (not in the paper: the head's log-probability of the
     training descriptions that c matches, in c's nearest wording, :func:`~facelib.guidance.contrastive_text_score`,
-    at the head's training temperature; default lambda CONTRASTIVE_GUIDANCE_WEIGHT; chapter 06
-    section 10 measures that it steers the order of enriched texts, which the cosine cannot).
+    at the head's training temperature; default lambda CONTRASTIVE_GUIDANCE_WEIGHT and rate
+    CONTRASTIVE_LR; chapter 06 section 10 measures that it steers the order of enriched texts, which
+    the cosine cannot).
     head_input: "x_t" (Alg. 2: the head reads the candidate x_{t-1}) or "x0_hat" (not in the paper:
     it reads the denoiser's estimate of the clean sequence, :func:`~facelib.guidance.denoised_text_score`;
     twice the cost; chapter 06 section 8 measures that it does not fix the order of enriched texts).
+    particles (not in the paper; chapter 06 section 11): K > 1 guided chains per sequence down to the
+    time label ``select_time``, where the one the score rates highest continues alone (about K times
+    the cost before select_time; no callback).  max_time: leave the steps above this time label
+    unguided (None: guide them all; section 11 uses PARTICLE_MAX_TIME with its particles).
     """
     from .text import get_encoder
     from .train import description_embeddings
@@ -232,6 +280,12 @@ def text_control(text, n=8, dataset=TEXT_DATASET, num_frames=40, steps=None, gui
         raise ValueError(f"score must be one of {TEXT_SCORES}, got {score!r}")
     if score == "contrastive" and head_input != "x_t":
         raise ValueError("the contrastive score reads x_t: use head_input='x_t' with score='contrastive'")
+    if isinstance(particles, bool) or not isinstance(particles, (int, np.integer)) or particles < 1:
+        raise ValueError(f"particles must be a positive integer, got {particles!r}")
+    if particles > 1 and callback is not None:
+        raise ValueError("text_control takes no callback with particles > 1 (the batch changes at select_time)")
+    if isinstance(select_time, bool) or not isinstance(select_time, (int, float, np.integer)) or select_time <= 0:
+        raise ValueError(f"select_time must be a positive time label, got {select_time!r}")
     texts, num_frames = _text_list(text, n), check_num_frames(num_frames)
     encoder = encoder or get_encoder()
     embeddings = torch.as_tensor(encoder.encode(texts))
@@ -241,17 +295,26 @@ def text_control(text, n=8, dataset=TEXT_DATASET, num_frames=40, steps=None, gui
     denoiser = denoiser or load_denoiser(f"denoiser_{head.dataset}")
     if score == "contrastive":
         table = description_embeddings(data.load_dataset(head.dataset, "train"), encoder)
-        fn = contrastive_text_score(head.model, embeddings, nearest_wording(table, embeddings),
-                                    head.meta["training"]["temperature"])
-    elif head_input == "x_t":
-        fn = text_score(head.model, embeddings)
-    else:
-        fn = denoised_text_score(head.model, denoiser.model, denoiser.diffusion, embeddings)
-    if guidance_weight is None:
-        guidance_weight = CONTRASTIVE_GUIDANCE_WEIGHT if score == "contrastive" else TEXT_GUIDANCE_WEIGHT
-    lr = text_lr(steps, head.meta["training"]["num_diffusion_steps"]) if lr is None else lr
-    return _guided_sample(head, denoiser, steps, n, num_frames, seed, progress, callback,
-                          lambda diffusion: OptimisationGuidance(fn, diffusion, guidance_weight, lr))
+        references = nearest_wording(table, embeddings)
+
+    def score_for(repeat):  # the score of every chain, for a batch of repeat * n (particle-major)
+        e = embeddings.repeat(repeat, 1)
+        if score == "contrastive":
+            return contrastive_text_score(head.model, e, references.repeat(repeat, 1, 1),
+                                          head.meta["training"]["temperature"])
+        if head_input == "x_t":
+            return text_score(head.model, e)
+        return denoised_text_score(head.model, denoiser.model, denoiser.diffusion, e)
+
+    guidance_weight = text_guidance_weight(score) if guidance_weight is None else guidance_weight
+    lr = text_lr(steps, head.meta["training"]["num_diffusion_steps"], score) if lr is None else lr
+
+    def make_guidance(diffusion, repeat=1):
+        return OptimisationGuidance(score_for(repeat), diffusion, guidance_weight, lr, max_time=max_time)
+    if particles == 1:
+        return _guided_sample(head, denoiser, steps, n, num_frames, seed, progress, callback, make_guidance)
+    return _best_of_particles(head, denoiser, steps, n, num_frames, seed, progress, make_guidance, score_for,
+                              int(particles), select_time)
 
 
 def _text_list(text, n):

@@ -131,6 +131,20 @@ def test_sampling_is_deterministic_and_last_step_adds_no_noise():
     torch.testing.assert_close(s1, s2)
 
 
+def test_a_chain_stopped_at_end_step_continues_exactly_on_its_generator():
+    # the particles of text control stop K chains at step k and continue one: with the same generator,
+    # stopping and continuing is the uninterrupted chain, draw for draw
+    d = GaussianDiffusion(linear_betas(20))
+    model = lambda x, t, mask: 0.1 * x  # noqa: E731
+    whole = d.sample(model, (4, 3), seed=5, progress=False)
+    g = torch.Generator().manual_seed(5)
+    x7 = d.sample(model, (4, 3), progress=False, end_step=7, generator=g)
+    torch.testing.assert_close(d.sample(model, (4, 3), x_T=x7, start_step=7, progress=False, generator=g), whole)
+    for bad in (-1, 20, 1.5, True):
+        with pytest.raises(ValueError, match="end_step"):
+            d.sample(model, (4, 3), progress=False, end_step=bad)
+
+
 def test_respacing_keeps_alpha_bar_and_time_labels():
     d = GaussianDiffusion(linear_betas(2000))
     r = d.respace(50)

@@ -172,14 +172,16 @@ def test_contrastive_score_is_the_heads_log_probability_of_the_matched_descripti
 def test_contrastive_score_steers_the_order_that_the_cosine_cannot(head, denoiser):
     # chapter 06 section 10: on enriched sentences of both orders, the type-S IC's probability of the
     # requested order is far higher when Alg. 2 climbs log p(c | x) than when it climbs the cosine
+    # (both at the cosine's rate, and lambda 1e-4 for the contrastive score: the strong end of the sweep)
     ev = evaluation.load_evaluator("coma+bu", "S")
     pairs = [(y, k) for y in ("happy", "surprise", "mouth_open", "bareteeth", "sad", "eyebrow") for k in ("N2E", "E2N")]
     texts = [descriptions.enriched_texts(y, k)[0] for y, k in pairs]
     order = np.array([1 if k == "E2N" else 0 for _, k in pairs])
     kwargs = dict(steps=30, seed=3, head=head, denoiser=denoiser, progress=False)
     p_order = {}
+    strong = {"cosine": {}, "contrastive": dict(guidance_weight=1e-4, lr=tasks.text_lr(30))}
     for score in tasks.TEXT_SCORES:
-        x = tasks.text_control(texts, len(texts), score=score, **kwargs)
+        x = tasks.text_control(texts, len(texts), score=score, **strong[score], **kwargs)
         p = torch.softmax(torch.as_tensor(ev.features(x)), 1).numpy().reshape(len(x), -1, 2).sum(1)
         p_order[score] = p[np.arange(len(x)), order]
     assert p_order["contrastive"].mean() > p_order["cosine"].mean() + 0.2
@@ -190,6 +192,54 @@ def test_contrastive_score_steers_the_order_that_the_cosine_cannot(head, denoise
         tasks.text_control("sad", 1, score="dot", **kwargs)
     with pytest.raises(ValueError, match="reads x_t"):
         tasks.text_control("sad", 1, score="contrastive", head_input="x0_hat", **kwargs)
+
+
+def test_particles_pick_the_chain_that_the_head_reads_as_the_requested_order(head, denoiser):
+    # chapter 06 section 11: K = 4 contrastive-guided chains per sentence, the head keeps the best at
+    # t = SELECT_TIME; the type-S IC's probability of the requested order rises over one chain
+    ev = evaluation.load_evaluator("coma+bu", "S")
+    pairs = [(y, k) for y in ("happy", "surprise", "mouth_open", "bareteeth", "sad", "eyebrow") for k in ("N2E", "E2N")]
+    texts = [descriptions.enriched_texts(y, k)[0] for y, k in pairs]
+    order = np.array([1 if k == "E2N" else 0 for _, k in pairs])
+    kwargs = dict(steps=30, seed=3, score="contrastive", head=head, denoiser=denoiser, progress=False)
+    p_order = {}
+    for k in (1, 4):
+        x = tasks.text_control(texts, len(texts), particles=k, max_time=tasks.PARTICLE_MAX_TIME, **kwargs)
+        p = torch.softmax(torch.as_tensor(ev.features(x)), 1).numpy().reshape(len(x), -1, 2).sum(1)
+        p_order[k] = p[np.arange(len(x)), order]
+    assert p_order[4].mean() > p_order[1].mean() + 0.1
+    assert p_order[4][order == 1].mean() > 0.6 and p_order[4][order == 0].mean() > 0.6
+    a = tasks.text_control(texts[:2], 2, particles=2, **kwargs)
+    assert a.shape == (2, 40, 68, 3) and np.array_equal(a, tasks.text_control(texts[:2], 2, particles=2, **kwargs))
+    for bad, message in ((dict(particles=0), "particles must be"), (dict(particles=2.5), "particles must be"),
+                         (dict(particles=2, select_time=-1), "select_time"),
+                         (dict(particles=2, select_time=5000), "first step"),
+                         (dict(particles=2, callback=lambda *a: None), "no callback"),
+                         (dict(max_time=0), "max_time")):
+        with pytest.raises(ValueError, match=message):
+            tasks.text_control("sad", 1, **kwargs, **bad)
+
+
+def test_best_particles_keeps_the_highest_scoring_candidate_of_each_sequence():
+    x = torch.arange(6.0).reshape(6, 1) * torch.tensor([1.0, -1.0, 1.0, -1.0, 1.0, -1.0])[:, None]  # 3 particles of 2
+    picked = guidance.best_particles(x, lambda x, t: x[:, 0], None, 3)  # score = the value itself
+    assert picked.tolist() == [[4.0], [-1.0]]  # sequence 0: candidates 0, 2, 4; sequence 1: -1, -3, -5
+    for bad in (0, 4, True):
+        with pytest.raises(ValueError, match="particles must be"):
+            guidance.best_particles(x, lambda x, t: x[:, 0], None, bad)
+    with pytest.raises(ValueError, match="not finite"):
+        guidance.best_particles(x, lambda x, t: x[:, 0] / 0.0 * 0.0, None, 3)
+
+
+def test_guidance_above_max_time_is_left_out():
+    diffusion = GaussianDiffusion(linear_betas(2000)).respace(10)
+    x = torch.zeros(2, 4, 68, 3)
+    out = {"mean": x, "variance": torch.ones(2, 1, 1, 1)}
+    g = OptimisationGuidance(lambda x, t: x.sum((1, 2, 3)), diffusion, 0.0, 0.1, max_time=1000)
+    high = int(np.flatnonzero(diffusion.timesteps > 1000)[0])
+    low = int(np.flatnonzero((diffusion.timesteps <= 1000) & (diffusion.timesteps > 0))[-1])
+    assert torch.equal(g(x, x, high, out), x)
+    assert (g(x, x, low, out) > 0).all()  # climbs the score
 
 
 def test_decoder_then_diffusion_trades_fidelity_for_diversity(denoiser):
@@ -233,6 +283,11 @@ def test_text_control_is_deterministic_and_follows_the_text(head, denoiser):
 
 def test_default_text_rate_is_the_sweep_pick_at_100_steps_and_scales_with_one_over_steps(head, denoiser):
     assert tasks.text_lr(tasks.TEXT_LR_REFERENCE_STEPS) == pytest.approx(tasks.TEXT_LR)
+    assert tasks.text_lr(4 * tasks.TEXT_LR_REFERENCE_STEPS, score="contrastive") == pytest.approx(tasks.CONTRASTIVE_LR / 4)
+    assert tasks.text_guidance_weight("contrastive") == tasks.CONTRASTIVE_GUIDANCE_WEIGHT == guidance.GUIDANCE_WEIGHT
+    for fn in (tasks.text_lr, tasks.text_guidance_weight):
+        with pytest.raises(ValueError, match="score must be one of"):
+            fn(score="dot")
     assert tasks.text_lr(4 * tasks.TEXT_LR_REFERENCE_STEPS) == pytest.approx(tasks.TEXT_LR / 4)
     assert tasks.text_lr(None) == pytest.approx(tasks.TEXT_LR * tasks.TEXT_LR_REFERENCE_STEPS / 2000)
     assert tasks.step_scaled_lr(0.1, 100, 400) == pytest.approx(0.05)  # the default power 0.5 of label control
@@ -295,6 +350,7 @@ def test_cli_text_task_writes_npz(tmp_path, capsys):
     assert config["dataset"] == "coma+bu" and config["text_head"] == "guide_coma+bu_text"
     assert config["adagrad_lr"] == pytest.approx(tasks.text_lr(5))
     assert config["guidance_weight"] == tasks.TEXT_GUIDANCE_WEIGHT and config["head_input"] == "x_t"
+    assert config["particles"] == 1 and config["max_time"] is None
     assert main(["sample", "--task", "text", "--text", "from sad to the neutral face", "--n", "1", "--steps", "3",
                  "--head-input", "x0_hat", "--out", str(out)]) == 0
     assert json.loads(str(np.load(out)["config"]))["head_input"] == "x0_hat"
@@ -302,12 +358,21 @@ def test_cli_text_task_writes_npz(tmp_path, capsys):
                  "--score", "contrastive", "--out", str(out)]) == 0
     config = json.loads(str(np.load(out)["config"]))
     assert config["score"] == "contrastive" and config["guidance_weight"] == tasks.CONTRASTIVE_GUIDANCE_WEIGHT
+    assert config["adagrad_lr"] == pytest.approx(tasks.text_lr(3, score="contrastive"))
+    assert main(["sample", "--task", "text", "--text", "from sad to the neutral face", "--n", "2", "--steps", "10",
+                 "--score", "contrastive", "--particles", "3", "--max-time", "1400", "--out", str(out)]) == 0
+    config = json.loads(str(np.load(out)["config"]))
+    assert config["particles"] == 3 and config["select_time"] == tasks.SELECT_TIME and config["max_time"] == 1400
+    assert np.load(out)["landmarks"].shape == (2, 40, 68, 3)
+    with pytest.raises(SystemExit):
+        main(["sample", "--task", "label", "--label", "happy", "--particles", "2", "--out", str(out)])
+    assert "belong to --task text" in capsys.readouterr().err
     assert main(["sample", "--task", "text", "--text", "from sad to the neutral face", "--n", "2", "--steps", "20",
                  "--decoder-start", "400", "--out", str(out)]) == 0
     config = json.loads(str(np.load(out)["config"]))
     assert config["method"] == "decoder_then_diffusion" and config["decoder_start"] == 400
     assert np.load(out)["landmarks"].shape == (2, 40, 68, 3)
-    for extra in (["--lr", "0.1"], ["--head-input", "x0_hat"], ["--score", "contrastive"]):  # options of Alg. 2 that the decoder route would ignore
+    for extra in (["--lr", "0.1"], ["--head-input", "x0_hat"], ["--score", "contrastive"], ["--particles", "2"]):  # options of Alg. 2 that the decoder route would ignore
         with pytest.raises(SystemExit):
             main(["sample", "--task", "text", "--text", "sad", "--n", "1", "--steps", "5", "--decoder-start", "400",
                   *extra, "--out", str(out)])
