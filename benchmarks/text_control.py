@@ -54,24 +54,24 @@ def main():
     print(f"cores: {os.cpu_count()}, torch threads: {torch.get_num_threads()}, dataset: {DATASET}, "
           f"n = {args.n}, lambda {tasks.text_guidance_weight('cosine')} (cosine) / {tasks.text_guidance_weight('contrastive')} "
           f"(contrastive), task {task}")
-    print(f"{'method':<26}{'steps':>6}{'seconds':>10}{'ms/step':>9}{'Acc %':>8}{'FID':>8}{'lr':>8}")
+    print(f"{'method':<30}{'steps':>6}{'seconds':>10}{'ms/step':>9}{'Acc %':>8}{'FID':>8}{'lr':>8}")
     test = data.load_dataset(DATASET, "test")
     pick = np.random.default_rng(0).choice(len(test), min(args.n, len(test)), replace=False)
     gt = ev.score(test.landmarks[pick], test.targets(kind)[pick])
-    print(f"{'GT (test sequences)':<26}{'':>6}{'':>10}{'':>9}{gt['accuracy']:>8.1f}{gt['fid']:>8.2f}")
+    print(f"{'GT (test sequences)':<30}{'':>6}{'':>10}{'':>9}{gt['accuracy']:>8.1f}{gt['fid']:>8.2f}")
     model = baselines.load_baseline("motionclip", DATASET)
     t0 = time.perf_counter()
     x = baselines.generate_from_text(model, texts, encoder=encoder)
     dt = time.perf_counter() - t0
     s = ev.score(x, targets)
-    print(f"{'MotionCLIP-style':<26}{'':>6}{dt:>10.2f}{'':>9}{s['accuracy']:>8.1f}{s['fid']:>8.2f}", flush=True)
+    print(f"{'MotionCLIP-style':<30}{'':>6}{dt:>10.2f}{'':>9}{s['accuracy']:>8.1f}{s['fid']:>8.2f}", flush=True)
     for steps in args.steps:  # not in the paper: the decoder's sequence re-noised and denoised (chapter 06 section 9)
         t0 = time.perf_counter()
         x = tasks.decoder_then_diffusion(texts, args.n, steps=steps, seed=0, denoiser=denoiser, decoder=model,
                                          encoder=encoder, progress=False)
         dt = time.perf_counter() - t0
         s = ev.score(x, targets)
-        print(f"{f'decoder + DDPM (t0={tasks.DECODER_START})':<26}{steps:>6}{dt:>10.1f}{'':>9}"
+        print(f"{f'decoder + DDPM (t0={tasks.DECODER_START})':<30}{steps:>6}{dt:>10.1f}{'':>9}"
               f"{s['accuracy']:>8.1f}{s['fid']:>8.2f}", flush=True)
     for steps, head_input, score, k in itertools.product(args.steps, args.head_input, args.score, args.particles):
         if score == "contrastive" and head_input != "x_t":
@@ -84,7 +84,7 @@ def main():
         dt = time.perf_counter() - t0
         s = ev.score(x, targets)
         name = f"ours, {score}, {head_input}" + (f", K={k}" if k > 1 else "")
-        print(f"{name:<26}{steps:>6}{dt:>10.1f}{1e3 * dt / steps:>9.1f}{s['accuracy']:>8.1f}"
+        print(f"{name:<30}{steps:>6}{dt:>10.1f}{1e3 * dt / steps:>9.1f}{s['accuracy']:>8.1f}"
               f"{s['fid']:>8.2f}{lr:>8.3g}", flush=True)
 
 
