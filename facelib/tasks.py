@@ -213,12 +213,18 @@ def label_control(label, n=16, dataset="coma", num_frames=40, steps=None, guidan
     return _guided_sample(guide, denoiser, steps, n, num_frames, seed, progress, callback, make_guidance)
 
 
+def _guided_chain(guide, denoiser, steps):
+    """The denoiser of the guide's dataset (or the given one, checked to share the guide's space) and its
+    chain of ``steps`` steps."""
+    denoiser = denoiser or load_denoiser(f"denoiser_{guide.dataset}")
+    check_same_space(denoiser, guide)
+    return denoiser, denoiser.diffusion_with(steps)
+
+
 def _guided_sample(guide, denoiser, steps, n, num_frames, seed, progress, callback, make_guidance):
     """Sample n sequences (n, F, 68, 3) float32 mm with ``make_guidance(diffusion)`` injected, from the
     denoiser of the guide's dataset (or the given one, checked to share the guide's space)."""
-    denoiser = denoiser or load_denoiser(f"denoiser_{guide.dataset}")
-    check_same_space(denoiser, guide)
-    diffusion = denoiser.diffusion_with(steps)
+    denoiser, diffusion = _guided_chain(guide, denoiser, steps)
     x = diffusion.sample(denoiser.model, (n, num_frames, 68, 3), seed=seed, guide=make_guidance(diffusion),
                          progress=progress, callback=callback)
     return denoiser.normalizer.denormalize(x.detach()).numpy()
@@ -230,9 +236,7 @@ def _best_of_particles(guide, denoiser, steps, n, num_frames, seed, progress, ma
     (make_guidance(diffusion, repeat) for a batch of repeat * n) down to the step nearest the time label
     ``select_time``; for each sequence the chain with the highest score(repeat) there continues alone
     (:func:`~facelib.guidance.best_particles`), on the rest of the same random stream."""
-    denoiser = denoiser or load_denoiser(f"denoiser_{guide.dataset}")
-    check_same_space(denoiser, guide)
-    diffusion = denoiser.diffusion_with(steps)
+    denoiser, diffusion = _guided_chain(guide, denoiser, steps)
     k = max(1, int(np.argmin(np.abs(diffusion.timesteps - select_time))))
     if k >= diffusion.num_steps:
         raise ValueError(f"select_time {select_time} is the chain's first step: pick one below "
