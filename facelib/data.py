@@ -374,6 +374,34 @@ def merge(parts, name):
                                                                for p, o in zip(parts, subject_offsets)])})
 
 
+def composed_performances(dataset, labels, kind="N2E", seed=0):
+    """The synthetic world's own composition of expressions (chapter 06 section 6; no dataset holds
+    one): for every subject of ``dataset`` (a FaceDataset), one performance of each label in
+    ``labels`` (one or two names), combined as FACS combines action units, per AU the stronger of
+    the performances (a per-AU maximum of the apex intensities), then played as one ``kind``
+    sequence with the world's timing and capture noise.  One label gives a plain performance.
+
+    Returns landmarks (n, F, 68, 3) float32 in mm and the subject id (n,) of each sequence."""
+    labels = (labels,) if isinstance(labels, str) else tuple(labels)
+    if not 1 <= len(labels) <= 2:
+        raise ValueError(f"labels must be one or two label names, got {labels!r}")
+    for label in labels:
+        if label not in dataset.label_names:
+            raise ValueError(f"unknown label {label!r} for dataset {dataset.name!r}; allowed: "
+                             f"{', '.join(dataset.label_names)}")
+    if kind not in KIND_NAMES:
+        raise ValueError(f"kind must be one of {KIND_NAMES}, got {kind!r}")
+    subjects = np.unique(dataset.subjects)
+    out = np.zeros((len(subjects), dataset.num_frames, 68, 3), np.float32)
+    for i, s in enumerate(subjects):
+        rng = np.random.default_rng([seed, 13, int(s)])
+        apex = np.max([expressions.apex_intensities(label, expressions.sample_style(label, rng), rng,
+                                                    scale=rng.uniform(*APEX_SCALE)) for label in labels], 0)
+        w = sequences.au_curves(apex, kind, dataset.num_frames, rng, TIMING)
+        out[i] = dataset.face(int(s)).landmarks(w) + TIMING.noise_mm * rng.standard_normal(out.shape[1:])
+    return out, subjects
+
+
 def expression_split(dataset, held_out):
     """(train, test) subsets of ``dataset`` where the test part holds the labels in ``held_out``."""
     held_out = [held_out] if isinstance(held_out, str) else list(held_out)

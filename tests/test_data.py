@@ -113,3 +113,28 @@ def test_bad_indices(coma_train):
         coma_train.meshes(len(coma_train))
     with pytest.raises(ValueError, match="subject must be in"):
         coma_train.neutral_mesh(99)
+
+
+def test_composed_performances_show_the_action_units_of_both_labels(coma_train):
+    from facelib import rig_fit
+    from facelib.face.aus import AU_NAMES
+    bu = data.load_dataset("bu", "test")
+    both, subjects = data.composed_performances(bu, ("disgust", "happy"))
+    assert both.shape == (len(np.unique(bu.subjects)), bu.num_frames, 68, 3) and both.dtype == np.float32
+    assert np.array_equal(subjects, np.unique(bu.subjects))
+    again, _ = data.composed_performances(bu, ("disgust", "happy"))
+    assert np.array_equal(both, again)
+    alone = {label: data.composed_performances(bu, label)[0] for label in ("disgust", "happy")}
+    nose, smile = AU_NAMES.index("AU9"), AU_NAMES.index("AU12L")  # disgust wrinkles the nose, happy smiles
+
+    def apex_aus(x):  # AU intensities fitted to the last frame (N2E ends at the apex) of three subjects
+        return np.array([rig_fit.fit_aus(bu.face(int(s)), x[i, -1:])[0] for i, s in enumerate(subjects[:3])])
+    w_both, w_disgust, w_happy = apex_aus(both), apex_aus(alone["disgust"]), apex_aus(alone["happy"])
+    assert (w_both[:, nose] > w_happy[:, nose] + 0.3).all() and (w_both[:, smile] > w_disgust[:, smile] + 0.3).all()
+    assert np.abs(both[:, 0] - bu.sequence_neutrals()[:1]).max() < 50  # an N2E sequence starts near neutral
+    for labels, message in (((), "one or two"), (("disgust", "happy", "sad"), "one or two"),
+                            (("bareteeth",), "unknown label 'bareteeth'")):
+        with pytest.raises(ValueError, match=message):
+            data.composed_performances(bu, labels)
+    with pytest.raises(ValueError, match="kind must be one of"):
+        data.composed_performances(bu, "happy", kind="apex")
