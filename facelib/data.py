@@ -124,6 +124,13 @@ def test_subjects(spec):
     return np.sort(rng.permutation(spec.num_subjects)[:spec.num_test_subjects])
 
 
+def _play(face, apex, kind, num_frames, rng):
+    """One performance of AU apex intensities as a ``kind`` sequence on ``face``: landmarks (F, 68, 3)
+    in mm with the world's timing and capture noise, and the AU curves (F, NUM_AUS) that made it."""
+    w = sequences.au_curves(apex, kind, num_frames, rng, TIMING)
+    return face.landmarks(w) + TIMING.noise_mm * rng.standard_normal((len(w), 68, 3)), w
+
+
 def generate(spec, num_frames=40):
     """Generate all sequences of a dataset (both splits) as a dict of arrays (deterministic)."""
     num_frames = _check_length(num_frames)
@@ -148,9 +155,7 @@ def generate(spec, num_frames=40):
                                              spread, labels)
         rng = np.random.default_rng([spec.seed, 2, s, l, take])
         apex = expressions.apex_intensities(labels[l], style, rng, scale=rng.uniform(*APEX_SCALE))
-        w = sequences.au_curves(apex, KIND_NAMES[kind], int(lengths[i]), rng, TIMING)
-        landmarks[i, :len(w)] = face.landmarks(w) + TIMING.noise_mm * rng.standard_normal((len(w), 68, 3))
-        weights[i, :len(w)] = w
+        landmarks[i, :lengths[i]], weights[i, :lengths[i]] = _play(face, apex, KIND_NAMES[kind], int(lengths[i]), rng)
     plan = np.array(plan)
     return {
         "landmarks": landmarks, "au_weights": weights, "lengths": lengths.astype(np.int64),
@@ -397,8 +402,7 @@ def composed_performances(dataset, labels, kind="N2E", seed=0):
         rng = np.random.default_rng([seed, 13, int(s)])
         apex = np.max([expressions.apex_intensities(label, expressions.sample_style(label, rng), rng,
                                                     scale=rng.uniform(*APEX_SCALE)) for label in labels], 0)
-        w = sequences.au_curves(apex, kind, dataset.num_frames, rng, TIMING)
-        out[i] = dataset.face(int(s)).landmarks(w) + TIMING.noise_mm * rng.standard_normal(out.shape[1:])
+        out[i] = _play(dataset.face(int(s)), apex, kind, dataset.num_frames, rng)[0]
     return out, subjects
 
 
