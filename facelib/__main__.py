@@ -105,11 +105,11 @@ def _sample(args):
         raise ValueError('--task text needs --text (e.g. --text "disgust high smile")')
     if args.decoder_start is not None and (args.task != "text" or args.lr is not None or args.guidance_weight is not None
                                            or args.head_input != "x_t" or args.score != "cosine"
-                                           or args.particles != 1 or args.max_time is not None):
+                                           or args.particles != 1 or args.max_time is not None or args.vocabulary):
         raise ValueError("--decoder-start belongs to --task text and replaces Alg. 2's guidance: it takes no --lr, "
-                         "--guidance-weight, --head-input, --score, --particles or --max-time")
-    if (args.particles != 1 or args.max_time is not None) and args.task != "text":
-        raise ValueError("--particles and --max-time belong to --task text")
+                         "--guidance-weight, --head-input, --score, --vocabulary, --particles or --max-time")
+    if (args.particles != 1 or args.max_time is not None or args.vocabulary) and args.task != "text":
+        raise ValueError("--particles, --max-time and --vocabulary belong to --task text")
     dataset = args.dataset or (tasks.TEXT_DATASET if args.task == "text" else "coma")
     denoiser = tasks.load_denoiser(args.checkpoint or f"denoiser_{dataset}")
     used = {"task": args.task, "n": args.n, "length": args.length, "seed": args.seed,
@@ -135,10 +135,11 @@ def _sample(args):
     elif args.task == "text":
         landmarks = tasks.text_control(args.text, args.n, dataset=dataset, num_frames=args.length, steps=args.steps,
                                        guidance_weight=weight, lr=lr, head_input=args.head_input, score=args.score,
-                                       particles=args.particles, max_time=args.max_time, seed=args.seed,
-                                       denoiser=denoiser)
+                                       vocabulary=args.vocabulary, particles=args.particles, max_time=args.max_time,
+                                       seed=args.seed, denoiser=denoiser)
         used.update(dataset=dataset, text=args.text, method="alg2", guidance_weight=weight, adagrad_lr=lr,
-                    head_input=args.head_input, score=args.score, adagrad_steps=guidance.ADAGRAD_STEPS,
+                    head_input=args.head_input, score=args.score, vocabulary=args.vocabulary,
+                    adagrad_steps=guidance.ADAGRAD_STEPS,
                     particles=args.particles, select_time=tasks.SELECT_TIME if args.particles > 1 else None,
                     max_time=args.max_time, text_head=f"guide_{dataset}_text")
         extra["texts"] = np.array([args.text] * args.n)
@@ -264,6 +265,9 @@ def main(argv=None):
     p.add_argument("--score", default="cosine", choices=["cosine", "contrastive"], help="--task text: the score "
                    "that Alg. 2 climbs, the cosine of Eq. 10 or the text head's log-probability of the text against "
                    "the training descriptions (not in the paper; chapter 06 section 10)")
+    p.add_argument("--vocabulary", action="store_true", help="--task text with --score contrastive: match the text "
+                   "against the vocabulary, the training descriptions and those written blind (not in the paper; "
+                   "chapter 06 section 12)")
     p.add_argument("--particles", type=int, default=1, help="--task text: best-of-K, K guided chains per sequence "
                    "until the time label tasks.SELECT_TIME, where the text head keeps one (not in the paper; chapter 06 "
                    "section 11; default 1)")

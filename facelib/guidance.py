@@ -83,7 +83,23 @@ def match_log_weights(text_embeddings, references, match_temperature=MATCH_TEMPE
     return torch.log_softmax(torch.einsum("bd,bnd->bn", e, refs) / match_temperature, -1)
 
 
-def contrastive_text_score(head, text_embeddings, references, temperature, match_temperature=MATCH_TEMPERATURE):
+def vocabulary_log_weights(text_embeddings, vocabulary, match_temperature=MATCH_TEMPERATURE):
+    """log w_n, w_n = softmax_n max_k cos(E(c), E(v_nk)) / match_temperature (B, N): how a text (B, D)
+    matches N classes, each known by K descriptions v_nk (vocabulary (N, K, D); a class with fewer
+    repeats some, which changes no maximum).  A class is as near as its nearest description: a
+    nearest-neighbour match, in which one more way to say a label raises that label's weight for the
+    texts near it, and for no others.  With K = 1 it is :func:`match_log_weights`."""
+    _check_positive("the match temperature", match_temperature)
+    e = torch.nn.functional.normalize(torch.as_tensor(text_embeddings, dtype=torch.float32), dim=-1)
+    v = torch.nn.functional.normalize(torch.as_tensor(vocabulary, dtype=torch.float32), dim=-1)
+    if e.ndim != 2 or v.ndim != 3 or v.shape[-1] != e.shape[-1]:
+        raise ValueError(f"need text embeddings (B, D) and a vocabulary (classes, K, D), got {tuple(e.shape)} and "
+                         f"{tuple(v.shape)}")
+    return torch.log_softmax(torch.einsum("bd,nkd->bnk", e, v).amax(-1) / match_temperature, -1)
+
+
+def contrastive_text_score(head, text_embeddings, references, temperature, match_temperature=MATCH_TEMPERATURE,
+                           vocabulary=None):
     """score(x, t) = log sum_n w_n p(r_n | x, t) (B,): the text head's probability of the reference
     descriptions r_n (B, N, D) that the text c matches (not in the paper; chapter 06 section 10).
 
@@ -92,7 +108,9 @@ def contrastive_text_score(head, text_embeddings, references, temperature, match
     * w_n = softmax_n cos(E(c), E(r_n)) / match_temperature: what c means, as references.  A training
       description matches itself (w is one-hot on it: the score is log p(c | x, t), Alg. 1's score
       with the head as a classifier over descriptions); a phrasing never seen in training matches
-      the descriptions nearest to it in the encoder's space.
+      the descriptions nearest to it in the encoder's space.  With a ``vocabulary`` (N, K, D), the
+      descriptions whose meaning is known for each reference's class (not in the paper; chapter 06
+      section 12), w is :func:`vocabulary_log_weights` instead: c is matched against all of them.
 
     Why not the cosine of Eq. 10: its gradient is mostly the direction that every description of
     the wording shares, and the order of an enriched sentence is a small angle next to it (chapter
@@ -106,7 +124,12 @@ def contrastive_text_score(head, text_embeddings, references, temperature, match
         raise ValueError(f"need references (B, N, D) for text embeddings (B, D) = {tuple(shape)}, "
                          f"got {tuple(refs.shape)}")
     _check_positive("the temperature", temperature)
-    log_w = match_log_weights(text_embeddings, references, match_temperature)
+    if vocabulary is None:
+        log_w = match_log_weights(text_embeddings, references, match_temperature)
+    else:
+        log_w = vocabulary_log_weights(text_embeddings, vocabulary, match_temperature)
+        if log_w.shape != refs.shape[:2]:
+            raise ValueError(f"the vocabulary knows {log_w.shape[1]} classes, the references are {refs.shape[1]}")
 
     def score(x, t):
         logits = torch.einsum("bd,bnd->bn", head.embed(x, t), refs.to(x.device)) / temperature

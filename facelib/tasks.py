@@ -252,8 +252,8 @@ def _best_of_particles(guide, denoiser, steps, n, num_frames, seed, progress, ma
 
 
 def text_control(text, n=8, dataset=TEXT_DATASET, num_frames=40, steps=None, guidance_weight=None,
-                 lr=None, head_input="x_t", score="cosine", particles=1, select_time=SELECT_TIME, max_time=None,
-                 seed=0, denoiser=None, head=None, encoder=None, progress=True, callback=None):
+                 lr=None, head_input="x_t", score="cosine", vocabulary=False, particles=1, select_time=SELECT_TIME,
+                 max_time=None, seed=0, denoiser=None, head=None, encoder=None, progress=True, callback=None):
     """Text control (Alg. 2): n sequences (n, F, 68, 3) float32 in mm that show what ``text`` says.
 
     text: a description ("disgust high smile", "from the neutral face to bareteeth"), or a list of
@@ -268,6 +268,10 @@ def text_control(text, n=8, dataset=TEXT_DATASET, num_frames=40, steps=None, gui
     at the head's training temperature; default lambda CONTRASTIVE_GUIDANCE_WEIGHT and rate
     CONTRASTIVE_LR; chapter 06 section 10 measures that it steers the order of enriched texts, which
     the cosine cannot).
+    vocabulary (not in the paper; chapter 06 section 12; contrastive score only): match the text
+    against every description of the "vocabulary" (facelib/descriptions.py: the training ones and
+    phrasings and templates written blind, which no network has seen) instead of its nearest
+    wording's training descriptions alone, so that more ways to say a label are understood.
     head_input: "x_t" (Alg. 2: the head reads the candidate x_{t-1}) or "x0_hat" (not in the paper:
     it reads the denoiser's estimate of the clean sequence, :func:`~facelib.guidance.denoised_text_score`;
     twice the cost; chapter 06 section 8 measures that it does not fix the order of enriched texts).
@@ -284,6 +288,11 @@ def text_control(text, n=8, dataset=TEXT_DATASET, num_frames=40, steps=None, gui
         raise ValueError(f"score must be one of {TEXT_SCORES}, got {score!r}")
     if score == "contrastive" and head_input != "x_t":
         raise ValueError("the contrastive score reads x_t: use head_input='x_t' with score='contrastive'")
+    if vocabulary not in (False, True):
+        raise ValueError(f"vocabulary must be True or False, got {vocabulary!r}")
+    if vocabulary and score != "contrastive":
+        raise ValueError("the vocabulary is matched by the contrastive score: use vocabulary=True with "
+                         "score='contrastive'")
     if isinstance(particles, bool) or not isinstance(particles, (int, np.integer)) or particles < 1:
         raise ValueError(f"particles must be a positive integer, got {particles!r}")
     if particles > 1 and callback is not None:
@@ -298,14 +307,15 @@ def text_control(text, n=8, dataset=TEXT_DATASET, num_frames=40, steps=None, gui
         raise ValueError("text control needs a text head (load_text_head), not a label classifier")
     denoiser = denoiser or load_denoiser(f"denoiser_{head.dataset}")
     if score == "contrastive":
-        table = description_embeddings(data.load_dataset(head.dataset, "train"), encoder)
-        references = nearest_wording(table, embeddings)
+        train = data.load_dataset(head.dataset, "train")
+        references = nearest_wording(description_embeddings(train, encoder), embeddings)
+        known = description_embeddings(train, encoder, "vocabulary").flatten(0, 1) if vocabulary else None
 
     def score_for(repeat):  # the score of every chain, for a batch of repeat * n (particle-major)
         e = embeddings.repeat(repeat, 1)
         if score == "contrastive":
             return contrastive_text_score(head.model, e, references.repeat(repeat, 1, 1),
-                                          head.meta["training"]["temperature"])
+                                          head.meta["training"]["temperature"], vocabulary=known)
         if head_input == "x_t":
             return text_score(head.model, e)
         return denoised_text_score(head.model, denoiser.model, denoiser.diffusion, e)

@@ -232,10 +232,15 @@ class TextHeadTraining:
 
 def description_embeddings(dataset, encoder, split="train"):
     """Text embeddings (labels, 2 kinds, K, D) of every description of every (label, order): the
-    raw text, its paraphrases and the enriched sentences of ``split`` (facelib/descriptions.py)."""
+    raw text, its paraphrases and the enriched sentences of ``split`` (facelib/descriptions.py).
+    Where a split has fewer descriptions for some (label, order), as the "vocabulary" does, they are
+    repeated in turn up to the longest list's K (for a nearest-description match, a repeat changes
+    nothing; the "train" split has the same K for all)."""
     from .descriptions import descriptions
-    return torch.stack([torch.stack([torch.as_tensor(encoder.encode(list(descriptions(label, kind, split))))
-                                     for kind in dataset.kind_names]) for label in dataset.label_names])
+    texts = [[list(descriptions(label, kind, split)) for kind in dataset.kind_names] for label in dataset.label_names]
+    k = max(len(d) for row in texts for d in row)
+    return torch.stack([torch.stack([torch.as_tensor(encoder.encode([d[i % len(d)] for i in range(k)])) for d in row])
+                        for row in texts])
 
 
 def text_head_loss(output, table, labels, kinds, choice, contrastive_weight=1.0, temperature=0.05):

@@ -66,10 +66,43 @@ def test_descriptions_cover_every_label_and_keep_held_out_phrasings_apart():
     assert every_train.isdisjoint(every_held) and len(every_train) == 3 * len(ALL_LABELS)
     assert descriptions.enriched_texts("mouth_open", "N2E")[0] == "from the neutral face to mouth open"
     assert descriptions.enriched_texts("mouth_open", "E2N")[0] == "from mouth open to the neutral face"
-    for call, msg in [(lambda: descriptions.phrasings("smile"), "allowed"), (lambda: descriptions.phrasings("happy", "test"), "held_out"),
+    for call, msg in [(lambda: descriptions.phrasings("smile"), "allowed"),
+                      (lambda: descriptions.phrasings("happy", "test"), "blind_held_out"),
                       (lambda: descriptions.enriched_texts("happy", "X2Y"), "N2E")]:
         with pytest.raises(ValueError, match=msg):
             call()
+
+
+def test_written_blind_sets_keep_held_out_phrasings_held_out():
+    # chapter 06 section 12: the vocabulary (train + the first blind writer's phrasings and templates)
+    # holds no held-out phrasing, the blind held-out set no vocabulary phrasing; what was dropped is listed
+    from facelib import descriptions
+    from facelib.face.expressions import ALL_LABELS
+    key = lambda p: " ".join(p.lower().split())  # noqa: E731
+    held = {key(p) for y in ALL_LABELS for p in descriptions.phrasings(y, "held_out")}
+    vocabulary = {key(p) for y in ALL_LABELS for p in descriptions.phrasings(y, "vocabulary")}
+    blind = {key(p) for y in ALL_LABELS for p in descriptions.phrasings(y, "blind_held_out")}
+    assert vocabulary.isdisjoint(held) and blind.isdisjoint(vocabulary)
+    for y in ALL_LABELS:
+        train, voc = descriptions.phrasings(y), descriptions.phrasings(y, "vocabulary")
+        assert voc[:len(train)] == train and len(voc) >= len(train) + 5
+        assert len(descriptions.phrasings(y, "blind_held_out")) >= 2
+        written = set(descriptions.WRITTEN_VOCABULARY[y])
+        assert written - set(voc) == set(descriptions.dropped("vocabulary")[y]) <= held | set(train)
+        assert set(descriptions.dropped("blind_held_out")[y]) == set(descriptions.WRITTEN_BLIND_HELD_OUT[y]) - set(
+            descriptions.phrasings(y, "blind_held_out"))
+        for kind in ("N2E", "E2N"):
+            enriched = descriptions.enriched_texts(y, kind, "vocabulary")
+            assert set(descriptions.enriched_texts(y, kind)) <= set(enriched)
+            assert len(enriched) == len(voc) * len(descriptions.TEMPLATES["vocabulary"])
+    assert "furious" in descriptions.dropped("vocabulary")["anger"]  # written by both: stays held out
+    first = descriptions.WRITTEN_BLIND_HELD_OUT_TEMPLATES[0][1].format(x=descriptions.phrasings("sad", "blind_held_out")[0])
+    assert descriptions.enriched_texts("sad", "E2N", "blind_held_out")[0] == first
+    spec = descriptions.writers_spec()
+    assert all(f"`{y}`" in spec for y in ALL_LABELS) and "AU9 nose wrinkler" in spec
+    assert not any(p in spec for y in ALL_LABELS for p in descriptions.phrasings(y, "held_out"))
+    with pytest.raises(ValueError, match="only the written splits"):
+        descriptions.dropped("train")
 
 
 def test_held_out_paraphrases_are_closer_to_their_label_than_to_others(encoder):
