@@ -57,6 +57,8 @@ ENRICHED_TEMPLATES = {  # split: ((N2E template, E2N template), ...); {x} is a p
     "held_out": (("starting neutral and ending with {x}", "starting with {x} and ending neutral"),),
 }
 
+WRITERS_SPEC_SHA256 = "d2c174fb531e0929f1f5e716b899ab8c2484fe4183a3577bbb069abff277bc28"  # of writers_spec() as the writers saw it (session 12)
+
 WRITTEN_VOCABULARY = {  # label: phrasings, as the first blind writer wrote them
     "bareteeth": ("all the teeth showing", "a toothy grimace", "a teeth-showing face", "front teeth exposed",
                   "lips drawn apart over the teeth", "upper lip raised, lips stretched wide", "teeth on display",
@@ -222,7 +224,8 @@ def descriptions(label, kind, split="train"):
 def writers_spec():
     """What the blind writers of the "vocabulary" and "blind_held_out" texts were shown: each label,
     its raw text and the action units the synthetic world moves for it (markdown)."""
-    lines = ["Each label is one facial action performed by a subject. The first 12 are CoMA-style instructions (a "
+    lines = ["# The 18 facial actions of the synthetic face world", "",
+             "Each label is one facial action performed by a subject. The first 12 are CoMA-style instructions (a "
              "person is asked to make a face), the last 6 are the basic emotions of BU-4DFE. For each: the label's "
              "raw text (the label name written as words) and the action units (FACS) the synthetic world moves, "
              "with their apex intensity ranges (1 = a strong typical apex).", ""]

@@ -1,4 +1,6 @@
 """The offline text encoder of text control (Alg. 2): real embeddings, caching, clear errors."""
+import hashlib
+
 import numpy as np
 import pytest
 
@@ -99,6 +101,8 @@ def test_written_blind_sets_keep_held_out_phrasings_held_out():
     first = descriptions.WRITTEN_BLIND_HELD_OUT_TEMPLATES[0][1].format(x=descriptions.phrasings("sad", "blind_held_out")[0])
     assert descriptions.enriched_texts("sad", "E2N", "blind_held_out")[0] == first
     spec = descriptions.writers_spec()
+    # the spec the writers saw: if the world's recipes change, the written texts describe another world
+    assert hashlib.sha256(spec.encode()).hexdigest() == descriptions.WRITERS_SPEC_SHA256
     assert all(f"`{y}`" in spec for y in ALL_LABELS) and "AU9 nose wrinkler" in spec
     assert not any(p in spec for y in ALL_LABELS for p in descriptions.phrasings(y, "held_out"))
     with pytest.raises(ValueError, match="only the written splits"):
