@@ -18,6 +18,8 @@
   A written phrasing that is already a held-out one (for the vocabulary) or a known one (for the
   blind held-out set) is dropped, so that held-out stays held out (:func:`dropped` lists them).
 """
+from __future__ import annotations
+
 from .face.aus import AU_DESCRIPTIONS
 from .face.expressions import ALL_LABELS, KIND_NAMES, RECIPES, check_label
 
@@ -57,7 +59,8 @@ ENRICHED_TEMPLATES = {  # split: ((N2E template, E2N template), ...); {x} is a p
     "held_out": (("starting neutral and ending with {x}", "starting with {x} and ending neutral"),),
 }
 
-WRITERS_SPEC_SHA256 = "d2c174fb531e0929f1f5e716b899ab8c2484fe4183a3577bbb069abff277bc28"  # of writers_spec() as the writers saw it (session 12)
+# sha256 of writers_spec() as the writers saw it: the written texts below describe this world
+WRITERS_SPEC_SHA256 = "d2c174fb531e0929f1f5e716b899ab8c2484fe4183a3577bbb069abff277bc28"
 
 WRITTEN_VOCABULARY = {  # label: phrasings, as the first blind writer wrote them
     "bareteeth": ("all the teeth showing", "a toothy grimace", "a teeth-showing face", "front teeth exposed",
