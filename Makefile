@@ -1,6 +1,7 @@
 # Two commands from a fresh clone (only Python 3.11 needed):
 #   make book   build the HTML book in _build/html (executes every notebook, book mode)
 #   make test   unit tests + every notebook through nbmake, in fast mode (FACELIB_FAST=1)
+#   make chapter N=05 [FAST=1]   execute one chapter and print its time (outputs in _build/chapters/)
 PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV := .venv
 BIN := $(VENV)/bin
@@ -9,7 +10,7 @@ export VTK_DEFAULT_OPENGL_WINDOW := vtkEGLRenderWindow
 export PIP_DISABLE_PIP_VERSION_CHECK := 1
 WORKERS ?= 2
 
-.PHONY: venv data book test clean
+.PHONY: venv data book test chapter clean
 
 $(STAMP): requirements.txt pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -26,6 +27,10 @@ book: venv
 	$(BIN)/python -m facelib data
 	$(BIN)/jupyter-book build . --builder html --all -W --keep-going
 	@echo "The book is in _build/html/index.html"
+
+# One chapter, as in class: make chapter N=05 (book mode), make chapter N=05 FAST=1 (fast mode).
+chapter: venv
+	@$(BIN)/python -m facelib chapter "$(N)" $(if $(FAST),--fast)
 
 # One torch thread per test worker: two workers with two OpenMP threads each on two cores thrash.
 test: venv

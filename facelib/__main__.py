@@ -1,4 +1,4 @@
-"""Command line of the book: ``python -m facelib {data,train,sample,neutral,animate}`` (see ``--help`` of each)."""
+"""Command line of the book: ``python -m facelib {data,train,sample,neutral,animate,chapter}`` (see ``--help`` of each)."""
 from __future__ import annotations
 
 import argparse
@@ -219,6 +219,18 @@ def _animate(args):
     return 0
 
 
+def _chapter(args):
+    from . import chapters
+    mode = "fast" if args.fast else "book"
+    path = chapters.find_chapter(args.name)
+    print(f"executing {path.relative_to(config.PROJECT_ROOT)} in {mode} mode ...", flush=True)
+    seconds, out = chapters.run_chapter(args.name, fast=args.fast)
+    budget = chapters.BUDGET_S[mode]
+    print(f"{path.stem}: {seconds:.0f} s in {mode} mode (budget {budget} s{'' if seconds <= budget else ', OVER'}); "
+          f"executed notebook: {out.relative_to(config.PROJECT_ROOT)}")
+    return 0
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(prog="python -m facelib", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -310,6 +322,12 @@ def main(argv=None):
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", required=True, help="output folder (written all at once, or not at all)")
     p.set_defaults(func=_animate)
+
+    p = sub.add_parser("chapter", help="execute one chapter (book mode unless --fast), print its time; the executed "
+                       "notebook goes to _build/chapters/ (make chapter N=05)")
+    p.add_argument("name", help="chapter number (05), file stem (05_label_control) or name (label_control)")
+    p.add_argument("--fast", action="store_true", help="fast mode (FACELIB_FAST=1), as the tests run it")
+    p.set_defaults(func=_chapter)
     args = parser.parse_args(argv)
     try:
         return args.func(args)

@@ -38,21 +38,36 @@ class Evaluator:
         x = torch.as_tensor(check_sequences(sequences), dtype=torch.float32)
         return torch.cat([self.model(x[i:i + batch_size]) for i in range(0, len(x), batch_size)]).numpy()
 
-    def score(self, sequences, targets, seed=0):
-        """Accuracy (%), FID, diversity and multimodality of sequences generated for ``targets``."""
+    def score(self, sequences, targets, seed=0, intervals=False):
+        """Accuracy (%), FID, diversity and multimodality of sequences generated for ``targets``.
+
+        With ``intervals``, also ``accuracy_ci``, ``fid_ci`` and ``diversity_ci``: 95 % bootstrap
+        intervals over the sequences (:func:`metrics.bootstrap_interval`).
+        """
         targets = np.asarray(targets)
         if targets.shape != (len(sequences),):
             raise ValueError(f"need one target per sequence: {len(sequences)} sequences, targets {targets.shape}")
         f = self.features(sequences)
-        return {"accuracy": 100 * metrics.accuracy(f.argmax(1), targets),
-                "fid": metrics.frechet_distance(f, self.reference_features),
-                "diversity": metrics.diversity(f, seed=seed),
-                "multimodality": metrics.multimodality(f, targets, seed=seed)}
+        scores = {"accuracy": self._accuracy(f, targets), "fid": self._fid(f),
+                  "diversity": metrics.diversity(f, seed=seed),
+                  "multimodality": metrics.multimodality(f, targets, seed=seed)}
+        if intervals:
+            scores["accuracy_ci"] = metrics.bootstrap_interval(self._accuracy, f, targets, seed=seed)
+            scores["fid_ci"] = metrics.bootstrap_interval(self._fid, f, seed=seed)
+            scores["diversity_ci"] = metrics.bootstrap_interval(lambda g: metrics.diversity(g, seed=seed), f, seed=seed)
+        return scores
 
-    def ground_truth(self, seed=0):
+    @staticmethod
+    def _accuracy(features, targets):
+        return 100 * metrics.accuracy(features.argmax(1), targets)
+
+    def _fid(self, features):
+        return metrics.frechet_distance(features, self.reference_features)
+
+    def ground_truth(self, seed=0, intervals=False):
         """The GT row: the held-out test sequences scored like generated ones."""
         test = data.load_dataset(self.dataset, "test")
-        return self.score(test.landmarks, test.targets(self.classifier_type), seed=seed)
+        return self.score(test.landmarks, test.targets(self.classifier_type), seed=seed, intervals=intervals)
 
     def class_index(self, name):
         """Index of a class name; a clear error listing the valid names otherwise."""

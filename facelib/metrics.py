@@ -146,3 +146,26 @@ def seam_steps(sequences, known):
     k = np.broadcast_to(np.asarray(known, dtype=bool), x.shape[:2])
     i, f = np.nonzero(k[:, 1:] != k[:, :-1])  # a seam between frames f and f + 1 of sequence i
     return frame_speeds(x)[i, f]
+
+
+def bootstrap_interval(statistic, *samples, num_resamples=1000, level=0.95, seed=0):
+    """Percentile bootstrap interval of ``statistic(*samples)`` over the rows of the samples.
+
+    The samples (arrays with the same first dimension: one row per generated or test sequence)
+    are resampled together, with replacement, ``num_resamples`` times; returns (low, high), the
+    (1 - level) / 2 and (1 + level) / 2 quantiles of the statistic over the resamples.  This is
+    the interval of every Acc, FID and diversity the book compares: how much the number would
+    move with another draw of the same number of sequences.
+    """
+    arrays = [np.asarray(s) for s in samples]
+    if not arrays or any(len(a) != len(arrays[0]) for a in arrays):
+        raise ValueError(f"need samples with the same number of rows, got {[len(a) for a in arrays]}")
+    if len(arrays[0]) < 2:
+        raise ValueError("a bootstrap interval needs at least 2 rows")
+    if not 0 < level < 1:
+        raise ValueError(f"level must be in (0, 1), got {level}")
+    rng = np.random.default_rng(seed)
+    n = len(arrays[0])
+    values = [statistic(*(a[idx] for a in arrays)) for idx in rng.integers(0, n, (num_resamples, n))]
+    low, high = np.quantile(values, [(1 - level) / 2, (1 + level) / 2])
+    return float(low), float(high)

@@ -1,0 +1,184 @@
+"""Stored full-scale results: ``results/NAME.json``, a table and its provenance.
+
+A chapter runs a small live version of an experiment within its time budget; the full-scale one
+is a command (``python -m facelib experiment NAME``, see :mod:`facelib.experiments`) that stores
+its table here together with what is needed to trust and to re-run it: the exact command, the
+facelib commit, the sha256 of every checkpoint it used, the seeds, n, steps, the wall time and
+the number of cores.
+
+A stored result is *stale* when a checkpoint it names no longer has the sha256 it recorded (the
+model was retrained after the experiment ran): :func:`problems` says so, naming the file and the
+checkpoint, and a test fails on every stale or malformed file.  Files are written to a temporary
+file and renamed, so an interrupted command leaves the previous result intact.
+"""
+from __future__ import annotations
+
+import datetime
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import torch
+
+from . import config
+from .checkpoints import checkpoint_paths
+
+RESULTS_DIR = config.PROJECT_ROOT / "results"
+SCHEMA = 1
+# Every stored result has these keys (and nothing is optional): the table and its provenance.
+FIELDS = {
+    "schema": int, "name": str, "title": str, "command": str, "commit": str, "date": str,
+    "checkpoints": dict, "seeds": list, "n": int, "steps": list, "wall_time_s": float, "cores": int,
+    "torch_threads": int, "columns": list, "rows": list, "notes": str,
+}
+
+
+def result_path(name):
+    """results/NAME.json; a name is letters, digits and underscores."""
+    if not name or not name.replace("_", "").isalnum():
+        raise ValueError(f"a result name is letters, digits and underscores, got {name!r}")
+    return RESULTS_DIR / f"{name}.json"
+
+
+def facelib_commit():
+    """The git commit of the working tree (with '+dirty' when facelib/ has uncommitted changes)."""
+    def git(*args):
+        return subprocess.run(["git", *args], cwd=config.PROJECT_ROOT, capture_output=True, text=True,
+                              timeout=30).stdout.strip()
+    try:
+        commit = git("rev-parse", "HEAD") or "unknown"
+        dirty = git("status", "--porcelain", "--", "facelib")
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+    return commit + ("+dirty" if dirty else "")
+
+
+def invoking_command():
+    """The command line that is running, as a reader would type it from the repository root."""
+    script = Path(sys.argv[0])
+    if script.name == "__main__.py":
+        head = f"python -m {script.parent.name}"
+    else:
+        try:
+            head = f"python {script.resolve().relative_to(config.PROJECT_ROOT)}"
+        except ValueError:
+            head = f"python {script}"
+    return " ".join([head, *sys.argv[1:]])
+
+
+def checkpoint_sha256(name):
+    """The sha256 recorded in a shipped checkpoint's JSON (what :func:`checkpoints.load_checkpoint` checks)."""
+    _, js = checkpoint_paths(name)
+    if not js.exists():
+        raise FileNotFoundError(f"checkpoint {name!r} not found in {js.parent}")
+    return json.loads(js.read_text())["sha256"]
+
+
+def save_result(name, *, title, columns, rows, checkpoints, seeds, n, steps, wall_time_s, notes="",
+                command=None):
+    """Write results/NAME.json atomically; returns its path.
+
+    ``columns`` names the entries of every row (a row is a list, one entry per column: a number, a
+    string, or a [low, high] 95 % interval).  ``checkpoints`` lists the names of the shipped
+    checkpoints used; their sha256 are read from data/checkpoints.
+    """
+    path = result_path(name)
+    bad = [r for r in rows if len(r) != len(columns)]
+    if bad:
+        raise ValueError(f"every row needs {len(columns)} entries ({columns}), got {bad[0]}")
+    record = {
+        "schema": SCHEMA, "name": name, "title": title,
+        "command": command or invoking_command(),
+        "commit": facelib_commit(),
+        "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
+        "checkpoints": {c: checkpoint_sha256(c) for c in sorted(checkpoints)},
+        "seeds": [int(s) for s in seeds], "n": int(n), "steps": [int(s) for s in steps],
+        "wall_time_s": round(float(wall_time_s), 1), "cores": os.cpu_count() or 0,
+        "torch_threads": torch.get_num_threads(), "columns": list(columns), "rows": _plain(rows),
+        "notes": notes,
+    }
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        tmp.write_text(json.dumps(record, indent=1) + "\n")
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return path
+
+
+def problems(record, path="result"):
+    """What is wrong with a stored result: missing or mistyped fields, another schema, rows that do
+    not fit the columns, or checkpoints whose sha256 changed since it ran.  Empty when it is sound."""
+    found = []
+    for key, kind in FIELDS.items():
+        if key not in record:
+            found.append(f"{path}: missing field {key!r}")
+        elif not isinstance(record[key], kind) and not (kind is float and isinstance(record[key], int)):
+            found.append(f"{path}: field {key!r} should be {kind.__name__}, is {type(record[key]).__name__}")
+    if found:
+        return found
+    if record["schema"] != SCHEMA:
+        found.append(f"{path}: schema {record['schema']}, this facelib reads schema {SCHEMA}")
+    found += [f"{path}: row {i} has {len(r)} entries for {len(record['columns'])} columns"
+              for i, r in enumerate(record["rows"]) if len(r) != len(record["columns"])]
+    for name, stored in record["checkpoints"].items():
+        try:
+            shipped = checkpoint_sha256(name)
+        except FileNotFoundError:
+            found.append(f"{path}: checkpoint {name!r} is no longer shipped")
+            continue
+        if shipped != stored:
+            found.append(f"{path}: stale, checkpoint {name!r} has sha256 {shipped[:12]}..., the result was "
+                         f"computed with {stored[:12]}...; re-run: {record['command']}")
+    return found
+
+
+def load_result(name):
+    """Read results/NAME.json; ValueError naming the file and what changed if it is stale or malformed."""
+    path = result_path(name)
+    if not path.exists():
+        raise FileNotFoundError(f"{path} not found; write it with `python -m facelib experiment {name}`")
+    record = json.loads(path.read_text())
+    found = problems(record, path.name)
+    if found:
+        raise ValueError("; ".join(found))
+    return record
+
+
+def stored_results():
+    """Names of the results in results/."""
+    return sorted(p.stem for p in RESULTS_DIR.glob("*.json"))
+
+
+def _plain(value):
+    """JSON-ready copy: numpy scalars and arrays become Python numbers and lists."""
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if hasattr(value, "tolist"):
+        return _plain(value.tolist())
+    if isinstance(value, float):
+        return round(value, 4)
+    return value
+
+
+def markdown_table(record, fmt="{:.2f}"):
+    """A stored result as a Markdown table under a line saying it is stored: its command and date.
+
+    Numbers are formatted with ``fmt``; a [low, high] entry (a 95 % interval) is shown as
+    "[low, high]".
+    """
+    def cell(v):
+        if isinstance(v, (list, tuple)) and len(v) == 2 and all(isinstance(u, (int, float)) for u in v):
+            return f"[{fmt.format(v[0])}, {fmt.format(v[1])}]"
+        return fmt.format(v) if isinstance(v, float) else str(v)
+    head = (f"*Stored result* `results/{record['name']}.json`: {record['title']} (n = {record['n']}, "
+            f"{record['wall_time_s'] / 60:.0f} min on {record['cores']} cores, {record['date']}; "
+            f"re-run: `{record['command']}`)\n\n")
+    lines = ["| " + " | ".join(record["columns"]) + " |", "|" + "---|" * len(record["columns"])]
+    lines += ["| " + " | ".join(cell(v) for v in row) + " |" for row in record["rows"]]
+    return head + "\n".join(lines)

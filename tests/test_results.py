@@ -1,0 +1,98 @@
+"""Stored results (results/*.json): sound, fresh (checkpoint hashes match the shipped ones), and
+written atomically; bootstrap intervals behave like intervals."""
+import json
+
+import numpy as np
+import pytest
+
+from facelib import metrics, results
+
+
+@pytest.fixture
+def tmp_results(tmp_path, monkeypatch):
+    monkeypatch.setattr(results, "RESULTS_DIR", tmp_path)
+    return tmp_path
+
+
+def _save(name="demo", **overrides):
+    kwargs = dict(title="a demo", columns=["method", "Acc (%)", "95 % interval"],
+                  rows=[["ours", 80.0, [75.0, 85.0]]], checkpoints=["ic_coma_I"], seeds=[0], n=8, steps=[20],
+                  wall_time_s=1.0, command="python -m facelib experiment demo")
+    kwargs.update(overrides)
+    return results.save_result(name, **kwargs)
+
+
+@pytest.mark.parametrize("name", results.stored_results())
+def test_every_stored_result_is_sound_and_fresh(name):
+    record = json.loads(results.result_path(name).read_text())
+    assert results.problems(record, f"results/{name}.json") == []
+
+
+def test_save_then_load_keeps_the_table_and_its_provenance(tmp_results):
+    path = _save()
+    record = results.load_result("demo")
+    assert path == tmp_results / "demo.json"
+    assert record["rows"] == [["ours", 80.0, [75.0, 85.0]]]
+    assert record["checkpoints"]["ic_coma_I"] == results.checkpoint_sha256("ic_coma_I")
+    assert record["cores"] >= 1 and record["commit"] and record["command"].startswith("python -m facelib")
+    assert "re-run" in results.markdown_table(record) and "[75.00, 85.00]" in results.markdown_table(record)
+
+
+def test_a_stale_result_names_the_file_and_the_checkpoint(tmp_results):
+    path = _save()
+    record = json.loads(path.read_text())
+    record["checkpoints"]["ic_coma_I"] = "0" * 64
+    path.write_text(json.dumps(record))
+    with pytest.raises(ValueError, match=r"demo\.json: stale, checkpoint 'ic_coma_I'"):
+        results.load_result("demo")
+
+
+def test_a_result_of_another_schema_or_with_missing_fields_is_refused(tmp_results):
+    path = _save()
+    record = json.loads(path.read_text())
+    record["schema"] = 99
+    del record["seeds"]
+    path.write_text(json.dumps(record))
+    with pytest.raises(ValueError, match="missing field 'seeds'"):
+        results.load_result("demo")
+    record["seeds"] = [0]
+    path.write_text(json.dumps(record))
+    with pytest.raises(ValueError, match="schema 99"):
+        results.load_result("demo")
+
+
+def test_an_interrupted_write_leaves_the_previous_result(tmp_results, monkeypatch):
+    _save(rows=[["ours", 80.0, [75.0, 85.0]]])
+    before = (tmp_results / "demo.json").read_text()
+
+    def crash(*args, **kwargs):
+        raise KeyboardInterrupt
+    monkeypatch.setattr(results.os, "replace", crash)
+    with pytest.raises(KeyboardInterrupt):
+        _save(rows=[["ours", 10.0, [5.0, 15.0]]])
+    assert (tmp_results / "demo.json").read_text() == before
+    assert [p.name for p in tmp_results.iterdir()] == ["demo.json"]
+
+
+def test_bad_names_rows_and_checkpoints_are_refused(tmp_results):
+    with pytest.raises(ValueError, match="letters, digits and underscores"):
+        _save(name="../x")
+    with pytest.raises(ValueError, match="every row needs 3 entries"):
+        _save(rows=[["ours", 1.0]])
+    with pytest.raises(FileNotFoundError, match="no_such_model"):
+        _save(checkpoints=["no_such_model"])
+    with pytest.raises(FileNotFoundError, match="experiment missing"):
+        results.load_result("missing")
+    assert not list(tmp_results.iterdir())
+
+
+def test_bootstrap_interval_covers_the_mean_and_narrows_with_n():
+    rng = np.random.default_rng(0)
+    small, large = rng.normal(size=20), rng.normal(size=2000)
+    lo_s, hi_s = metrics.bootstrap_interval(np.mean, small)
+    lo_l, hi_l = metrics.bootstrap_interval(np.mean, large)
+    assert lo_s <= small.mean() <= hi_s and lo_l <= large.mean() <= hi_l
+    assert (hi_l - lo_l) < 0.2 * (hi_s - lo_s)
+    assert metrics.bootstrap_interval(np.mean, small, seed=3) == metrics.bootstrap_interval(np.mean, small, seed=3)
+    with pytest.raises(ValueError, match="same number of rows"):
+        metrics.bootstrap_interval(lambda a, b: 0.0, small, large)
