@@ -1,5 +1,13 @@
 """The book builds with notebook execution off and warnings as errors: a broken _toc.yml, link,
-cross-reference or markdown fails the tests (notebook execution itself is tested by nbmake)."""
+cross-reference or markdown fails the tests (notebook execution itself is tested by nbmake).
+
+Numbers in the prose are glued from cells ({glue:text}`key`).  With execution off no cell runs, so
+myst-nb cannot find any glued value and warns ([mystnb.glue]): the quick build suppresses that one
+warning type and nothing else, and a static test checks instead that every glue role of a chapter
+names a key that one of its own cells glues.  The full build (`make book`, -W) executes the cells
+and fails on any glue key left unfilled."""
+import json
+import re
 import shutil
 import subprocess
 import sys
@@ -13,6 +21,7 @@ ROOT = Path(__file__).resolve().parent.parent
 def test_book_builds_without_warnings(tmp_path):
     cfg = yaml.safe_load((ROOT / "_config.yml").read_text())
     cfg["execute"]["execute_notebooks"] = "off"
+    cfg["sphinx"]["config"]["suppress_warnings"] = ["mystnb.glue"]  # no cell ran: nothing is glued
     (tmp_path / "_config.yml").write_text(yaml.safe_dump(cfg))
     jb = Path(sys.executable).with_name("jupyter-book")
     cmd = [str(jb if jb.exists() else shutil.which("jupyter-book")), "build", str(ROOT), "--config",
@@ -23,8 +32,24 @@ def test_book_builds_without_warnings(tmp_path):
     assert (html / "index.html").exists() and (html / "book" / "01_face_world.html").exists()
 
 
+GLUE_ROLE = re.compile(r"\{glue(?::\w+)?\}`([^`:]+)(?::[^`]*)?`")
+GLUE_CALL = re.compile(r"glue\(\s*[\"']([^\"']+)[\"']")
+
+
+def test_every_glued_number_in_the_prose_is_glued_by_a_cell_of_the_same_chapter():
+    for nb in sorted((ROOT / "book").glob("*.ipynb")):
+        cells = json.loads(nb.read_text())["cells"]
+        used = {k for c in cells if c["cell_type"] == "markdown" for k in GLUE_ROLE.findall("".join(c["source"]))}
+        glued = {k for c in cells if c["cell_type"] == "code" for k in GLUE_CALL.findall("".join(c["source"]))}
+        assert used <= glued, f"{nb.name}: the prose uses glue keys no cell glues: {sorted(used - glued)}"
+
+
+def test_glue_patterns_find_roles_and_calls():
+    assert GLUE_ROLE.findall("a {glue:text}`ch05_acc:.1f` b {glue}`ch05_fig`") == ["ch05_acc", "ch05_fig"]
+    assert GLUE_CALL.findall("glue('ch05_acc', 1.0, display=False)\nglue(\"ch05_fig\", f)") == ["ch05_acc", "ch05_fig"]
+
+
 def test_notebooks_are_committed_without_outputs_and_listed():
-    import json
     toc = (ROOT / "_toc.yml").read_text()
     for nb in sorted((ROOT / "book").glob("*.ipynb")):
         cells = json.loads(nb.read_text())["cells"]
