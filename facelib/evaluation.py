@@ -42,7 +42,7 @@ class Evaluator:
         """Accuracy (%), FID, diversity and multimodality of sequences generated for ``targets``.
 
         With ``intervals``, also ``accuracy_ci``, ``fid_ci`` and ``diversity_ci``: 95 % bootstrap
-        intervals over the sequences (:func:`metrics.bootstrap_interval`).
+        intervals over the sequences (:func:`metrics.bootstrap_interval`, bias-corrected).
         """
         targets = np.asarray(targets)
         if targets.shape != (len(sequences),):
@@ -53,7 +53,8 @@ class Evaluator:
                   "multimodality": metrics.multimodality(f, targets, seed=seed)}
         if intervals:
             scores["accuracy_ci"] = metrics.bootstrap_interval(self._accuracy, f, targets, seed=seed)
-            scores["fid_ci"] = metrics.bootstrap_interval(self._fid, f, seed=seed)
+            low, high = metrics.bootstrap_interval(self._fid, f, seed=seed)
+            scores["fid_ci"] = (max(low, 0.0), high)  # a distance: the shifted interval may cross 0
             scores["diversity_ci"] = metrics.bootstrap_interval(lambda g: metrics.diversity(g, seed=seed), f, seed=seed)
         return scores
 
