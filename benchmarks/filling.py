@@ -1,12 +1,24 @@
-"""Time expression filling (Alg. 3) for 64 sequences and score the completions; print a table.
+"""Table 3 (expression filling, §5.3) on the test split of "coma": every method, with 95 % intervals.
 
-Usage: python benchmarks/filling.py [--setting FFM] [--n 64] [--steps 2000 200 100] [--resample 4]
-The n inputs are test sequences of "coma" (cycled) with the §5.3 masks of ``--setting``.  For each
-number of reverse steps (2000 = the paper's T; fewer = respaced) it prints the wall time, the time
-per step, the IC accuracy and FID of the completed sequences, the error on the missing frames and
-the median step across the seams; then, at the smallest step count, the same with RePaint
-resampling (``--resample``) and with reconstruction guidance, and the three baselines.  FID is computed from n sequences: compare rows
-with each other, not with tables computed from another n.
+Usage: python benchmarks/filling.py [--settings FFB FFE FFM] [--n N] [--steps 200] [--resample 4]
+                                    [--reconstruction-scale 2] [--save NAME]
+
+The n inputs are test sequences of "coma" (default: all of them; fewer: a random subset, seed 0;
+more: cycled, for timing) with the §5.3 masks of each setting (``inpainting.fill_masks``, seed 0).
+For each setting it prints, per method, the wall time, the IC (type I) accuracy and FID of the
+completed sequences with their 95 % bootstrap intervals over the sequences, the error on the
+missing frames and the median step across the seams.  Methods: mean imputation, linear
+interpolation, the BiLSTM filler, Alg. 3 at every step count of ``--steps`` (2000 = the paper's T;
+fewer = respaced), and, at the smallest step count, Alg. 3 with RePaint resampling and with
+reconstruction guidance.  FID is computed from n sequences: compare rows with each other, not with
+tables computed from another n.
+
+``--save NAME`` stores the table in results/NAME.json with its provenance (facelib.results); chapter
+07 shows ``results/filling_table3.json``, written by
+
+    python benchmarks/filling.py --save filling_table3
+
+(all 169 test sequences, 200 steps, r = 4: about 45 min on one core, 25 min on two).
 """
 import argparse
 import os
@@ -15,49 +27,82 @@ import time
 import numpy as np
 import torch
 
-from facelib import baselines, data, evaluation, inpainting, metrics, tasks
+from facelib import baselines, data, evaluation, inpainting, metrics, results, tasks
+
+COLUMNS = ["setting", "method", "steps", "Acc (%)", "Acc 95 % interval", "FID", "FID 95 % interval",
+           "L2 on missing frames (mm)", "seam step, median (mm/frame)", "seconds"]
+
+
+def pick_sequences(num_test, n):
+    """Indices of the n test sequences: all of them (n None), a random subset (seed 0), or cycled."""
+    if n is None or n == num_test:
+        return np.arange(num_test)
+    if n < num_test:
+        return np.sort(np.random.default_rng(0).choice(num_test, n, replace=False))
+    return np.resize(np.arange(num_test), n)
 
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--setting", default="FFM", choices=inpainting.FILL_SETTINGS)
-    parser.add_argument("--n", type=int, default=64)
-    parser.add_argument("--steps", type=int, nargs="+", default=[2000, 200, 100])
+    parser.add_argument("--settings", nargs="+", default=list(inpainting.FILL_SETTINGS),
+                        choices=inpainting.FILL_SETTINGS)
+    parser.add_argument("--n", type=int, default=None, help="test sequences per row (default: all)")
+    parser.add_argument("--steps", type=int, nargs="+", default=[200])
     parser.add_argument("--resample", type=int, default=4)
+    parser.add_argument("--reconstruction-scale", type=float, default=tasks.RECONSTRUCTION_SCALE)
+    parser.add_argument("--save", metavar="NAME", help="store the table in results/NAME.json")
     args = parser.parse_args()
+    t_start = time.perf_counter()
     ev = evaluation.load_evaluator("coma", "I")
     denoiser, filler = tasks.load_denoiser("denoiser_coma"), baselines.load_filler("coma")
     test = data.load_dataset("coma", "test")
-    idx = np.resize(np.arange(len(test)), args.n)
+    idx = pick_sequences(len(test), args.n)
+    n = len(idx)
     truth, targets = test.landmarks[idx], test.targets("I")[idx]
-    known = inpainting.fill_masks(args.setting, args.n, truth.shape[1], seed=0)
-    given = np.where(known[..., None, None], truth, np.nan)
-    print(f"cores: {os.cpu_count()}, torch threads: {torch.get_num_threads()}, setting {args.setting}, n = {args.n}")
-    print(f"{'method':<34}{'seconds':>9}{'ms/step':>9}{'Acc %':>8}{'FID':>8}{'L2 mm':>8}{'seam mm/f':>11}")
+    print(f"cores: {os.cpu_count()}, torch threads: {torch.get_num_threads()}, n = {n}, steps {args.steps}, "
+          f"r = {args.resample}, zeta = {args.reconstruction_scale:g}")
+    print(f"{'setting':<8}{'method':<40}{'seconds':>9}{'Acc %':>8} {'interval':>14}{'FID':>8} {'interval':>16}"
+          f"{'L2 mm':>8}{'seam mm/f':>11}")
+    rows = []
 
-    def row(name, fn, steps=None):
+    def row(setting, name, steps, fn, known):
         t0 = time.perf_counter()
         out = fn()
         dt = time.perf_counter() - t0
-        s = ev.score(out, targets)
-        per_step = f"{1e3 * dt / steps:>9.1f}" if steps else f"{'':>9}"
-        print(f"{name:<34}{dt:>9.1f}{per_step}{s['accuracy']:>8.1f}{s['fid']:>8.2f}"
-              f"{metrics.missing_frame_error(out, truth, known):>8.2f}{np.median(metrics.seam_steps(out, known)):>11.2f}",
-              flush=True)
+        s = ev.score(out, targets, intervals=True)
+        s["accuracy_ci"] = tuple(np.clip(s["accuracy_ci"], 0, 100))  # the shifted interval may leave [0, 100]
+        l2 = metrics.missing_frame_error(out, truth, known) if (~known).any() else 0.0
+        seam = float(np.median(metrics.seam_steps(out, known))) if (~known).any() else 0.0
+        rows.append([setting, name, steps or "-", s["accuracy"], list(s["accuracy_ci"]), s["fid"], list(s["fid_ci"]), l2,
+                     seam, dt])
+        acc_ci = "[{:.1f}, {:.1f}]".format(*s["accuracy_ci"])
+        fid_ci = "[{:.2f}, {:.2f}]".format(*s["fid_ci"])
+        print(f"{setting:<8}{name:<40}{dt:>9.1f}{s['accuracy']:>8.1f} {acc_ci:>14}{s['fid']:>8.2f} {fid_ci:>16}"
+              f"{l2:>8.2f}{seam:>11.2f}", flush=True)
 
-    row("ground truth", lambda: truth)
-    for steps in args.steps:
-        row(f"Alg. 3, {steps} steps", lambda: tasks.fill(given, known, steps=steps, denoiser=denoiser, progress=False), steps)
+    row("-", "ground truth", 0, lambda: truth, np.ones(truth.shape[:2], bool))
     low = min(args.steps)
-    row(f"Alg. 3 + RePaint r={args.resample}, {low} steps",
-        lambda: tasks.fill(given, known, steps=low, resample=args.resample, denoiser=denoiser, progress=False),
-        low * args.resample)
-    row(f"Alg. 3 + reconstruction, {low} steps",
-        lambda: tasks.fill(given, known, steps=low, reconstruction_scale=tasks.RECONSTRUCTION_SCALE, denoiser=denoiser,
-                           progress=False), low)
-    row("mean imputation", lambda: inpainting.mean_imputation(given, known))
-    row("linear interpolation", lambda: inpainting.linear_interpolation(given, known))
-    row("BiLSTM filler", lambda: baselines.lstm_fill(given, known, filler))
+    for setting in args.settings:
+        known = inpainting.fill_masks(setting, n, truth.shape[1], seed=0)
+        given = np.where(known[..., None, None], truth, np.nan)
+        fill = lambda steps, **kw: tasks.fill(given, known, steps=steps, denoiser=denoiser, progress=False, **kw)  # noqa: E731
+        row(setting, "mean imputation", 0, lambda: inpainting.mean_imputation(given, known), known)
+        row(setting, "linear interpolation", 0, lambda: inpainting.linear_interpolation(given, known), known)
+        row(setting, "BiLSTM filler (Berson et al.)", 0, lambda: baselines.lstm_fill(given, known, filler), known)
+        for steps in args.steps:
+            row(setting, "ours: Alg. 3", steps, lambda: fill(steps), known)
+        row(setting, f"ours + RePaint (r = {args.resample})", low, lambda: fill(low, resample=args.resample), known)
+        row(setting, f"ours + reconstruction guidance (zeta = {args.reconstruction_scale:g})", low,
+            lambda: fill(low, reconstruction_scale=args.reconstruction_scale), known)
+    if args.save:
+        path = results.save_result(
+            args.save, title="Table 3, expression filling on the coma test split (IC type I)", columns=COLUMNS,
+            rows=rows, checkpoints=["denoiser_coma", "lstm_filler_coma", "ic_coma_I"], seeds=[0], n=n,
+            steps=sorted(set(args.steps)), wall_time_s=time.perf_counter() - t_start,
+            notes=f"masks: inpainting.fill_masks(setting, n, 40, seed=0); sampler seed 0; RePaint r = {args.resample} "
+                  f"and reconstruction guidance (zeta = {args.reconstruction_scale:g}) at {low} steps; intervals: "
+                  "95 % bootstrap over the sequences (Evaluator.score(intervals=True)); seconds: wall time of the row")
+        print("stored", path)
 
 
 if __name__ == "__main__":
