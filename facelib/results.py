@@ -140,7 +140,8 @@ def load_result(name):
     """Read results/NAME.json; ValueError naming the file and what changed if it is stale or malformed."""
     path = result_path(name)
     if not path.exists():
-        raise FileNotFoundError(f"{path} not found; write it with `python -m facelib experiment {name}`")
+        raise FileNotFoundError(f"{path} not found; write it with the benchmark that stores it "
+                                f"(benchmarks/*.py --save {name}; the chapter names the command)")
     record = json.loads(path.read_text())
     found = problems(record, path.name)
     if found:

@@ -81,7 +81,7 @@ def test_bad_names_rows_and_checkpoints_are_refused(tmp_results):
         _save(rows=[["ours", 1.0]])
     with pytest.raises(FileNotFoundError, match="no_such_model"):
         _save(checkpoints=["no_such_model"])
-    with pytest.raises(FileNotFoundError, match="experiment missing"):
+    with pytest.raises(FileNotFoundError, match="--save missing"):
         results.load_result("missing")
     assert not list(tmp_results.iterdir())
 
