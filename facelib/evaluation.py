@@ -38,11 +38,14 @@ class Evaluator:
         x = torch.as_tensor(check_sequences(sequences), dtype=torch.float32)
         return torch.cat([self.model(x[i:i + batch_size]) for i in range(0, len(x), batch_size)]).numpy()
 
-    def score(self, sequences, targets, seed=0, intervals=False):
+    def score(self, sequences, targets, seed=0, intervals=False, num_resamples=1000):
         """Accuracy (%), FID, diversity and multimodality of sequences generated for ``targets``.
 
         With ``intervals``, also ``accuracy_ci``, ``fid_ci`` and ``diversity_ci``: 95 % bootstrap
-        intervals over the sequences (:func:`metrics.bootstrap_interval`, bias-corrected).
+        intervals over the sequences (:func:`metrics.bootstrap_interval`, bias-corrected, from
+        ``num_resamples`` resamples; each FID resample costs a matrix square root, so chapters pass
+        200).  The bias correction may shift an interval past the statistic's range; accuracy is
+        clipped to [0, 100] and FID to [0, inf).
         """
         targets = np.asarray(targets)
         if targets.shape != (len(sequences),):
@@ -52,10 +55,13 @@ class Evaluator:
                   "diversity": metrics.diversity(f, seed=seed),
                   "multimodality": metrics.multimodality(f, targets, seed=seed)}
         if intervals:
-            scores["accuracy_ci"] = metrics.bootstrap_interval(self._accuracy, f, targets, seed=seed)
-            low, high = metrics.bootstrap_interval(self._fid, f, seed=seed)
-            scores["fid_ci"] = (max(low, 0.0), high)  # a distance: the shifted interval may cross 0
-            scores["diversity_ci"] = metrics.bootstrap_interval(lambda g: metrics.diversity(g, seed=seed), f, seed=seed)
+            def interval(statistic, *samples):
+                return metrics.bootstrap_interval(statistic, *samples, num_resamples=num_resamples, seed=seed)
+            low, high = interval(self._accuracy, f, targets)
+            scores["accuracy_ci"] = (max(low, 0.0), min(high, 100.0))
+            low, high = interval(self._fid, f)
+            scores["fid_ci"] = (max(low, 0.0), high)
+            scores["diversity_ci"] = interval(lambda g: metrics.diversity(g, seed=seed), f)
         return scores
 
     @staticmethod

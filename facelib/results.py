@@ -178,7 +178,8 @@ def markdown_table(record, fmt="{:.2f}"):
             return f"[{fmt.format(v[0])}, {fmt.format(v[1])}]"
         return fmt.format(v) if isinstance(v, float) else str(v)
     head = (f"*Stored result* `results/{record['name']}.json`: {record['title']} (n = {record['n']}, "
-            f"{record['wall_time_s'] / 60:.0f} min on {record['cores']} cores, {record['date']}; "
+            f"{record['wall_time_s'] / 60:.0f} min on {record['cores']} cores with {record['torch_threads']} "
+            f"torch thread(s), {record['date']}; "
             f"re-run: `{record['command']}`)\n\n")
     lines = ["| " + " | ".join(record["columns"]) + " |", "|" + "---|" * len(record["columns"])]
     lines += ["| " + " | ".join(cell(v) for v in row) + " |" for row in record["rows"]]

@@ -69,6 +69,20 @@ def test_shipped_evaluators_give_the_ground_truth_row():
     assert np.allclose(ev.features(backwards), ev.features(backwards.copy()))
 
 
+def test_score_intervals_stay_in_range_and_hold_the_estimate():
+    ev = evaluation.load_evaluator("coma", "I")
+    train = data.load_dataset("coma", "train")
+    # the training set against itself: FID 0 and accuracy near 100, where the bias-corrected
+    # interval would cross the range of the statistic without clipping
+    s = ev.score(train.landmarks, train.targets("I"), intervals=True, num_resamples=200)
+    assert 0.0 <= s["accuracy_ci"][0] <= s["accuracy"] <= s["accuracy_ci"][1] <= 100.0
+    assert s["fid_ci"][0] == 0.0 <= s["fid"] <= s["fid_ci"][1]
+    assert s["diversity_ci"][0] <= s["diversity"] <= s["diversity_ci"][1]
+    # same seed, same interval; fewer resamples give a (slightly) different one
+    assert ev.score(train.landmarks, train.targets("I"), intervals=True, num_resamples=200) == s
+    assert ev.score(train.landmarks, train.targets("I"), intervals=True, num_resamples=50) != s
+
+
 def test_evaluator_errors():
     ev = evaluation.load_evaluator("bu", "I")
     with pytest.raises(ValueError, match="allowed: anger"):
