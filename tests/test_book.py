@@ -72,3 +72,14 @@ def test_notebooks_are_committed_without_outputs_and_listed():
         cells = json.loads(nb.read_text())["cells"]
         assert not any(c.get("outputs") for c in cells if c["cell_type"] == "code"), f"{nb.name} has outputs"
         assert f"book/{nb.stem}" in toc, f"{nb.name} is not in _toc.yml"
+
+
+def test_notebook_code_fits_the_page_column():
+    """Code lines wider than about 88 characters wrap in the rendered book; keep them within 88
+    (black -l 88 formats the code, comments and docstrings are wrapped by hand)."""
+    for nb in sorted((ROOT / "book").glob("*.ipynb")):
+        for cell in json.loads(nb.read_text())["cells"]:
+            if cell["cell_type"] != "code":
+                continue
+            for line in "".join(cell["source"]).split("\n"):
+                assert len(line) <= 88, f"{nb.name}, cell {cell.get('id')}: {len(line)} characters: {line}"
