@@ -1,4 +1,4 @@
-"""Command line of the book: ``python -m facelib {data,train,sample,neutral,animate,chapter}`` (see ``--help`` of each)."""
+"""Command line of the book: ``python -m facelib {data,train,sample,neutral,animate,chapter,results}`` (see ``--help`` of each)."""
 from __future__ import annotations
 
 import argparse
@@ -231,6 +231,17 @@ def _chapter(args):
     return 0
 
 
+def _results(args):
+    from . import results
+    entries = results.catalogue()
+    for e in entries:
+        state = "ok" if not e["problems"] else "STALE OR MALFORMED: " + "; ".join(e["problems"])
+        print(f"{e['name']:<24} {e['minutes']:6.1f} min on {e['cores']} cores, {e['threads']} torch thread(s), "
+              f"{e['date']}  {state}\n    {e['command']}")
+    print(f"{len(entries)} stored results in {results.RESULTS_DIR}; re-run a command to rewrite its file")
+    return 1 if any(e["problems"] for e in entries) else 0
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(prog="python -m facelib", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -328,6 +339,10 @@ def main(argv=None):
     p.add_argument("name", help="chapter number (05), file stem (05_label_control) or name (label_control)")
     p.add_argument("--fast", action="store_true", help="fast mode (FACELIB_FAST=1), as the tests run it")
     p.set_defaults(func=_chapter)
+
+    p = sub.add_parser("results", help="list the stored full-scale results (results/*.json): wall time, date, "
+                       "whether each is fresh, and the command that rewrites it")
+    p.set_defaults(func=_results)
     args = parser.parse_args(argv)
     try:
         return args.func(args)

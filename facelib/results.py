@@ -154,6 +154,19 @@ def stored_results():
     return sorted(p.stem for p in RESULTS_DIR.glob("*.json"))
 
 
+def catalogue():
+    """One line per stored result: its name, wall time, cores and torch threads, date, problems
+    (empty when sound and fresh) and the command that rewrites it."""
+    lines = []
+    for name in stored_results():
+        record = json.loads(result_path(name).read_text())
+        found = problems(record, f"{name}.json")
+        lines.append(dict(name=name, minutes=record.get("wall_time_s", float("nan")) / 60,
+                          cores=record.get("cores"), threads=record.get("torch_threads"),
+                          date=record.get("date"), problems=found, command=record.get("command")))
+    return lines
+
+
 def _plain(value):
     """JSON-ready copy: numpy scalars and arrays become Python numbers and lists."""
     if isinstance(value, dict):

@@ -105,3 +105,18 @@ def test_bootstrap_interval_of_a_biased_statistic_contains_the_statistic():
     fid = metrics.frechet_distance(a, reference)
     low, high = metrics.bootstrap_interval(lambda x: metrics.frechet_distance(x, reference), a)
     assert low <= fid <= high
+
+
+def test_the_command_line_lists_stored_results_and_flags_a_stale_one(tmp_results, capsys):
+    from facelib.__main__ import main
+    _save("fresh_one")
+    assert main(["results"]) == 0
+    out = capsys.readouterr().out
+    assert "fresh_one" in out and "ok" in out and "python -m facelib experiment demo" in out
+    path = _save("stale_one")
+    record = json.loads(path.read_text())
+    record["checkpoints"]["ic_coma_I"] = "0" * 64
+    path.write_text(json.dumps(record))
+    assert main(["results"]) == 1
+    out = capsys.readouterr().out
+    assert "stale_one" in out and "STALE" in out and "ic_coma_I" in out
