@@ -27,16 +27,17 @@ chapter 06 section 9: the baseline's sequence re-noised to tasks.DECODER_START a
 sequences (Evaluator.score(intervals=True)); --save NAME also writes the table to results/NAME.json
 (facelib.results.save_result: the command, commit, checkpoints' sha256, seeds, n, wall time).
 
-Full-scale commands of chapter 06 (times on 2 idle cores, roughly; the chapter runs smaller versions):
+Full-scale commands of chapter 06 (wall times with one torch thread, 2026-12-03; the chapter runs smaller
+versions and shows these stored tables):
   python benchmarks/text_control.py --n 72 --steps 100 --no-baselines --save text_sweep_cosine \
       --setting 0.01 0.01 --setting 0.01 0.1 --setting 0.001 0.03 --setting 0.001 0.1 --setting 0.001 0.2 \
-      --setting 0.0003 0.1 --setting 0.0003 0.2 --setting 0.0003 0.4 --setting 0.0001 0.2   # section 4, ~10 min
+      --setting 0.0003 0.1 --setting 0.0003 0.2 --setting 0.0003 0.4 --setting 0.0001 0.2   # section 4, 8 min
   python benchmarks/text_control.py --n 72 --steps 100 --enriched --score contrastive --no-baselines \
       --setting 0.0001 0.2 --setting 0.001 0.1 --setting 0.01 0.042 --setting 0.01 0.06 \
-      --save text_sweep_contrastive                                                     # section 10, ~5 min
-  python benchmarks/text_control.py --n 409 --steps 100 --score cosine contrastive --save text_table2_raw   # ~10 min
+      --save text_sweep_contrastive                                                     # section 10, 4 min
+  python benchmarks/text_control.py --n 409 --steps 100 --score cosine contrastive --save text_table2_raw   # 12 min
   python benchmarks/text_control.py --n 409 --steps 100 --enriched --score cosine contrastive --particles 1 4 \
-      --save text_table2_enriched                                                       # ~30 min
+      --save text_table2_enriched                                                       # 53 min
 """
 import argparse
 import itertools
