@@ -39,7 +39,7 @@ class Evaluator:
         return torch.cat([self.model(x[i:i + batch_size]) for i in range(0, len(x), batch_size)]).numpy()
 
     def score(self, sequences, targets, seed=0, intervals=False, num_resamples=1000):
-        """Accuracy (%), FID, diversity and multimodality of sequences generated for ``targets``.
+        """Accuracy (%), FID, diversity and multimodality (Python floats) of sequences generated for ``targets``.
 
         With ``intervals``, also ``accuracy_ci``, ``fid_ci`` and ``diversity_ci``: 95 % bootstrap
         intervals over the sequences (:func:`metrics.bootstrap_interval`, bias-corrected, from
@@ -51,12 +51,13 @@ class Evaluator:
         if targets.shape != (len(sequences),):
             raise ValueError(f"need one target per sequence: {len(sequences)} sequences, targets {targets.shape}")
         f = self.features(sequences)
-        scores = {"accuracy": self._accuracy(f, targets), "fid": self._fid(f),
-                  "diversity": metrics.diversity(f, seed=seed),
-                  "multimodality": metrics.multimodality(f, targets, seed=seed)}
+        scores = {"accuracy": float(self._accuracy(f, targets)), "fid": float(self._fid(f)),
+                  "diversity": float(metrics.diversity(f, seed=seed)),
+                  "multimodality": float(metrics.multimodality(f, targets, seed=seed))}
         if intervals:
             def interval(statistic, *samples):
-                return metrics.bootstrap_interval(statistic, *samples, num_resamples=num_resamples, seed=seed)
+                low, high = metrics.bootstrap_interval(statistic, *samples, num_resamples=num_resamples, seed=seed)
+                return float(low), float(high)
             low, high = interval(self._accuracy, f, targets)
             scores["accuracy_ci"] = (max(low, 0.0), min(high, 100.0))
             low, high = interval(self._fid, f)

@@ -78,6 +78,9 @@ def test_score_intervals_stay_in_range_and_hold_the_estimate():
     assert 0.0 <= s["accuracy_ci"][0] <= s["accuracy"] <= s["accuracy_ci"][1] <= 100.0
     assert s["fid_ci"][0] == 0.0 <= s["fid"] <= s["fid_ci"][1]
     assert s["diversity_ci"][0] <= s["diversity"] <= s["diversity_ci"][1]
+    # Python floats: myst-nb's glue formats them ({glue:text}`key:.1f`), not numpy scalars
+    assert all(type(v) is float for v in s.values() if not isinstance(v, tuple))
+    assert all(type(u) is float for v in s.values() if isinstance(v, tuple) for u in v)
     # same seed, same interval; fewer resamples give a (slightly) different one
     assert ev.score(train.landmarks, train.targets("I"), intervals=True, num_resamples=200) == s
     assert ev.score(train.landmarks, train.targets("I"), intervals=True, num_resamples=50) != s
