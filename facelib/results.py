@@ -183,17 +183,30 @@ def _plain(value):
 def markdown_table(record, fmt="{:.2f}"):
     """A stored result as a Markdown table under a line saying it is stored: its command and date.
 
-    Numbers are formatted with ``fmt``; a [low, high] entry (a 95 % interval) is shown as
-    "[low, high]".
+    Numbers are formatted with ``fmt`` (those below 0.1 with two significant digits).  A column of 95 % intervals ([low, high] entries) is merged
+    into the column before it, "value [low, high]", so that wide tables fit the page.
     """
     def cell(v):
-        if isinstance(v, (list, tuple)) and len(v) == 2 and all(isinstance(u, (int, float)) for u in v):
+        if _is_interval(v):
             return f"[{fmt.format(v[0])}, {fmt.format(v[1])}]"
-        return fmt.format(v) if isinstance(v, float) else str(v)
+        if isinstance(v, float):
+            return f"{v:.2g}" if 0 < abs(v) < 0.1 else fmt.format(v)  # small settings: 0.0003, not 0.00
+        return str(v)
+    columns, rows = list(record["columns"]), [[cell(v) for v in row] for row in record["rows"]]
+    for i in range(len(columns) - 1, 0, -1):
+        values = [row[i] for row in record["rows"]]
+        if any(_is_interval(v) for v in values) and all(_is_interval(v) or v in ("", None) for v in values):
+            columns[i - 1] = f"{columns[i - 1]} [95 % interval]"
+            del columns[i]
+            for row in rows:
+                row[i - 1] = f"{row[i - 1]} {row.pop(i)}".strip()
     head = (f"*Stored result* `results/{record['name']}.json`: {record['title']} (n = {record['n']}, "
             f"{record['wall_time_s'] / 60:.0f} min on {record['cores']} cores with {record['torch_threads']} "
-            f"torch thread(s), {record['date']}; "
-            f"re-run: `{record['command']}`)\n\n")
-    lines = ["| " + " | ".join(record["columns"]) + " |", "|" + "---|" * len(record["columns"])]
-    lines += ["| " + " | ".join(cell(v) for v in row) + " |" for row in record["rows"]]
+            f"torch thread(s), {record['date']}; re-run: `{record['command']}`)\n\n")
+    lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
+    lines += ["| " + " | ".join(row) + " |" for row in rows]
     return head + "\n".join(lines)
+
+
+def _is_interval(v):
+    return isinstance(v, (list, tuple)) and len(v) == 2 and all(isinstance(u, (int, float)) for u in v)

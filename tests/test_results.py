@@ -120,3 +120,11 @@ def test_the_command_line_lists_stored_results_and_flags_a_stale_one(tmp_results
     assert main(["results"]) == 1
     out = capsys.readouterr().out
     assert "stale_one" in out and "STALE" in out and "ic_coma_I" in out
+
+
+def test_markdown_table_merges_interval_columns_and_keeps_small_settings(tmp_results):
+    _save(columns=["method", "lr", "Acc (%)", "95 % interval", "FID", "FID 95 % interval"],
+          rows=[["ours", 0.0003, 80.0, [75.0, 85.0], 2.5, [1.0, 4.0]], ["GT", "", 85.0, [80.0, 90.0], 1.0, [0.5, 2.0]]])
+    table = results.markdown_table(results.load_result("demo"))
+    assert "| method | lr | Acc (%) [95 % interval] | FID [95 % interval] |" in table
+    assert "| ours | 0.0003 | 80.00 [75.00, 85.00] | 2.50 [1.00, 4.00] |" in table
