@@ -148,6 +148,12 @@ def seam_steps(sequences, known):
     return frame_speeds(x)[i, f]
 
 
+def intervals_overlap(a, b):
+    """True when the intervals a = (low, high) and b share a point: the data cannot order the two
+    estimates (the book reads a difference only where the 95 % intervals separate)."""
+    return a[0] <= b[1] and b[0] <= a[1]
+
+
 def bootstrap_interval(statistic, *samples, num_resamples=1000, level=0.95, seed=0):
     """Bias-corrected percentile bootstrap interval of ``statistic(*samples)`` over their rows.
 

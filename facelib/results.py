@@ -154,6 +154,11 @@ def stored_results():
     return sorted(p.stem for p in RESULTS_DIR.glob("*.json"))
 
 
+def row_dicts(record):
+    """The rows of a stored result as dicts keyed by its column names."""
+    return [dict(zip(record["columns"], row)) for row in record["rows"]]
+
+
 def catalogue():
     """One line per stored result: its name, wall time, cores and torch threads, date, problems
     (empty when sound and fresh) and the command that rewrites it."""
@@ -183,8 +188,9 @@ def _plain(value):
 def markdown_table(record, fmt="{:.2f}"):
     """A stored result as a Markdown table under a line saying it is stored: its command and date.
 
-    Numbers are formatted with ``fmt`` (those below 0.1 with two significant digits).  A column of 95 % intervals ([low, high] entries) is merged
-    into the column before it, "value [low, high]", so that wide tables fit the page.
+    Numbers are formatted with ``fmt`` (those below 0.1 with two significant digits).  A column of
+    95 % intervals ([low, high] entries) is merged into the column before it, "value [low, high]",
+    so that wide tables fit the page.
     """
     def cell(v):
         if _is_interval(v):

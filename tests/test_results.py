@@ -128,3 +128,11 @@ def test_markdown_table_merges_interval_columns_and_keeps_small_settings(tmp_res
     table = results.markdown_table(results.load_result("demo"))
     assert "| method | lr | Acc (%) [95 % interval] | FID [95 % interval] |" in table
     assert "| ours | 0.0003 | 80.00 [75.00, 85.00] | 2.50 [1.00, 4.00] |" in table
+
+
+def test_intervals_overlap_and_rows_as_dicts(tmp_results):
+    assert metrics.intervals_overlap((1.0, 3.0), (2.0, 5.0)) and metrics.intervals_overlap((1.0, 2.0), (2.0, 3.0))
+    assert not metrics.intervals_overlap((1.0, 2.0), (2.5, 3.0))
+    _save()
+    assert results.row_dicts(results.load_result("demo")) == [
+        {"method": "ours", "Acc (%)": 80.0, "95 % interval": [75.0, 85.0]}]
