@@ -22,7 +22,7 @@ import torch
 from facelib import data, results, tasks
 from facelib.metrics import (bootstrap_interval, landmark_statistics, nearest_neighbour_rmse, resample_frames,
                              temporal_roughness)
-from facelib.train import DenoiserTraining
+from facelib.config import DenoiserTraining
 
 
 def motion(x):

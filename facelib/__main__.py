@@ -42,40 +42,31 @@ TASKS = ("unconditional", "label", "text", "fill", "geometry")
 def _train(args):
     from dataclasses import replace
 
-    from . import train
-    if args.name not in TRAINABLE:
-        raise ValueError(f"unknown model {args.name!r}; allowed: {', '.join(TRAINABLE)}")
-
-    def with_steps(cfg):  # a shorter (or longer) run keeps the warm-up at most a tenth of it
-        return replace(cfg, steps=args.steps, warmup=min(cfg.warmup, args.steps // 10)) if args.steps else cfg
-
+    from . import training
+    settings = {"seed": args.seed}
+    if args.name in ("denoiser", "guide", "text_head", "evaluator", "actor", "motionclip", "motion3dgan", "lstm_filler"):
+        settings["dataset"] = args.dataset or ("coma+bu" if args.name in ("text_head", "motionclip") else "coma")
+    if args.name in ("guide", "evaluator"):
+        settings["classifier_type"] = args.type
+    if args.name == "deformer":
+        settings.update(method=args.method, split=args.split)
+    if args.variable_length:
+        if args.name != "denoiser":
+            raise ValueError("--variable-length trains a denoiser (paper App. A): use it with `train denoiser`")
+        settings["num_frames"] = (35, 45)
+    if args.batch_size:
+        settings["batch_size"] = args.batch_size
+    recipe = training.recipe(args.name, **settings)
+    if args.fast:
+        recipe.settings = recipe.settings.fast()
+    elif args.steps:
+        if recipe.settings.epochs is not None:
+            raise ValueError(f"{args.name} trains for a number of epochs ({recipe.settings.epochs}): --steps does not apply")
+        recipe.settings = recipe.settings.with_steps(args.steps)
     t0 = time.perf_counter()
-    if args.name == "denoiser":
-        cfg = train.DenoiserTraining(dataset=args.dataset, seed=args.seed)
-        if args.variable_length:
-            cfg = replace(cfg, num_frames=(35, 45))
-        pt, js = train.train_and_save(with_steps(cfg), name=args.out)
-    elif args.name == "guide":
-        cfg = train.GuideTraining(dataset=args.dataset, classifier_type=args.type, seed=args.seed)
-        pt, js = train.train_and_save_guide(with_steps(cfg), name=args.out)
-    elif args.name == "text_head":
-        cfg = train.TextHeadTraining(dataset=args.dataset, seed=args.seed)
-        pt, js = train.train_and_save_text_head(with_steps(cfg), name=args.out)
-    elif args.name == "evaluator":
-        cfg = train.EvaluatorTraining(dataset=args.dataset, classifier_type=args.type, seed=args.seed)
-        pt, js = train.train_and_save_evaluator(cfg, name=args.out)
-    elif args.name == "deformer":
-        from . import deformation
-        cfg = deformation.DeformationTraining(method=args.method, split=args.split, seed=args.seed)
-        pt, js = deformation.train_and_save_deformation(replace(cfg, steps=args.steps) if args.steps else cfg,
-                                                        name=args.out)
-    elif args.name == "lstm_filler":
-        from . import baselines
-        pt, js = baselines.train_and_save_filler(args.dataset, args.steps, args.seed, args.out)
-    else:
-        from . import baselines
-        pt, js = baselines.train_and_save_baseline(args.name, args.dataset, args.steps, args.seed, args.out)
-    print(f"trained in {time.perf_counter() - t0:.0f} s; wrote {pt} and {js}")
+    written = training.train_and_save(recipe, name=args.out, device=args.device, resume=args.resume)
+    if written:
+        print(f"trained in {time.perf_counter() - t0:.0f} s; wrote {written[0]} and {written[1]}")
     return 0
 
 
@@ -253,21 +244,31 @@ def main(argv=None):
                    help="record the datasets' fingerprints in data/synthetic/fingerprints.json")
     p.set_defaults(func=_data)
 
-    p = sub.add_parser("train", help="train a model and save it in data/checkpoints (.pt + .json)")
-    p.add_argument("name", help="what to train: " + ", ".join(TRAINABLE) + " (guide: the noisy classifier "
-                   "of Alg. 1; text_head: BiT(x_t, t) of Alg. 2, use --dataset coma+bu; evaluator: the independent LSTM classifier of §5; motion3dgan, actor: the baselines of Table 1; motionclip: the baseline of Table 2, use --dataset coma+bu; deformer: the mesh deformation of §3.3 and the "
-                   "baselines of Table 5, see --method and --split)")
-    p.add_argument("--dataset", default="coma", choices=list(data.DATASET_NAMES))
-    p.add_argument("--type", default="I", choices=list(data.CLASSIFIER_TYPES), help="classifier type (guide, evaluator): "
-                   "I = label, S = label x N2E/E2N")
-    p.add_argument("--variable-length", action="store_true", help="train on lengths 35-45 (paper App. A)")
-    p.add_argument("--method", default="ours", help="deformer: ours, no_attention, s2d, coma or linear (Table 5 rows)")
-    p.add_argument("--split", default="identity", help="deformer: identity (3 subjects held out) or expression "
-                   "(3 expressions held out), as §6")
-    p.add_argument("--steps", type=int, default=None, help="training steps (default: the shipped recipe)")
-    p.add_argument("--seed", type=int, default=0)
+    p = sub.add_parser("train", help="train a model and save it in data/checkpoints (.pt + .json); under "
+                       "`torchrun --nproc_per_node N -m facelib train ...` on N processes (distributed data parallel)")
+    p.add_argument("name", choices=list(TRAINABLE), help="denoiser: eps_theta of §3.1; guide: the noisy classifier of "
+                   "Alg. 1/4; text_head: BiT(x_t, t) of Alg. 2; evaluator: the independent LSTM classifier of §5; "
+                   "motion3dgan, actor: the baselines of Table 1; motionclip: the baseline of Table 2; lstm_filler: "
+                   "the baseline of Table 3; deformer: the mesh deformation of §3.3 and the baselines of Table 5")
+    p.add_argument("--dataset", default=None, choices=list(data.DATASET_NAMES),
+                   help="default: coma (coma+bu for text_head and motionclip, as §5.2)")
+    p.add_argument("--type", default="I", choices=list(data.CLASSIFIER_TYPES), help="guide, evaluator: I = label, "
+                   "S = label x N2E/E2N (default I)")
+    p.add_argument("--variable-length", action="store_true", help="denoiser: train on lengths 35-45 (paper App. A)")
+    p.add_argument("--method", default="ours", choices=["ours", "no_attention", "s2d", "coma", "linear"],
+                   help="deformer: a row of Table 5 (default ours)")
+    p.add_argument("--split", default="identity", choices=["identity", "expression"], help="deformer: 3 subjects "
+                   "or 3 expressions held out, as §6 (default identity)")
+    p.add_argument("--steps", type=int, default=None, help="training steps (default: the recipe's, facelib/config.py)")
+    p.add_argument("--batch-size", type=int, default=None, help="global batch, split over the processes "
+                   "(default: the recipe's)")
+    p.add_argument("--fast", action="store_true", help="the recipe's fast-mode settings (a few steps, for tests)")
+    p.add_argument("--seed", type=int, default=0, help="default 0")
+    p.add_argument("--device", default=None, choices=["cpu", "cuda"], help="default: a GPU when torch sees one")
+    p.add_argument("--resume", action="store_true", help="continue from <out>.state.pt if a run left one "
+                   "(the state is written every 500 steps)")
     p.add_argument("--out", default=None, help="checkpoint name or path stem (default: denoiser_<dataset>[_var], "
-                   "guide_<dataset>_<type>, ic_<dataset>_<type>, deform_<method>_<split>)")
+                   "guide_<dataset>_<type>, ic_<dataset>_<type>, deform_<method>_<split>, <baseline>_<dataset>)")
     p.set_defaults(func=_train)
 
     p = sub.add_parser("sample", help="generate landmark sequences and write them to an .npz")

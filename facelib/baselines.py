@@ -12,20 +12,17 @@ checkpoints are ``<name>_<dataset>`` in data/checkpoints.
 """
 from __future__ import annotations
 
-from dataclasses import asdict, replace
 
 import numpy as np
 import torch
 
 from . import data
-from .checkpoints import load_checkpoint, save_checkpoint
+from .checkpoints import load_checkpoint
+from .inpainting import check_fill_input, keep_known
 from .models import actor, lstm_filler, motion3dgan, motionclip
+from .text import get_encoder
 
-BASELINES = {
-    "motion3dgan": (motion3dgan, motion3dgan.Motion3DGANTraining, motion3dgan.train_motion3dgan),
-    "actor": (actor, actor.ActorTraining, actor.train_actor),
-    "motionclip": (motionclip, motionclip.MotionClipTraining, motionclip.train_motionclip),
-}
+BASELINES = {"motion3dgan": motion3dgan, "actor": actor, "motionclip": motionclip}
 LABEL_BASELINES = ("motion3dgan", "actor")  # the rows of Table 1 (chapter 05)
 
 
@@ -35,23 +32,9 @@ def check_baseline(name):
     return BASELINES[name]
 
 
-def train_and_save_baseline(name, dataset="coma", steps=None, seed=0, out=None, progress=True):
-    """Train a baseline on the training split of ``dataset`` and save it as <name>_<dataset>."""
-    module, training, train = check_baseline(name)
-    data.check_dataset_name(dataset)
-    cfg = training(dataset=dataset, seed=seed)
-    if steps:
-        cfg = replace(cfg, steps=steps)
-    model, history = train(cfg, progress=progress)
-    label_names = list(data.load_dataset(dataset, "train").label_names)
-    return save_checkpoint(out or f"{name}_{dataset}", model, name, module.config_dict(model),
-                           training=asdict(cfg), label_names=label_names, history=history,
-                           torch_version=torch.__version__)
-
-
 def load_baseline(name, dataset="coma", checkpoint=None):
     """Load a shipped baseline (sha256 checked); ``model.label_names`` lists its labels."""
-    module, _, _ = check_baseline(name)
+    module = check_baseline(name)
     data.check_dataset_name(dataset)
     checkpoint = checkpoint or f"{name}_{dataset}"
     model, meta = load_checkpoint(checkpoint, name, module.build)
@@ -74,7 +57,6 @@ def generate(model, labels, seed=0):
 def generate_from_text(model, texts, num_frames=40, encoder=None):
     """Sequences (n, F, 68, 3) float32 in mm from the MotionCLIP-style baseline, one per text
     (deterministic: the same text always gives the same sequence)."""
-    from .text import get_encoder
     texts = [texts] if isinstance(texts, str) else list(texts)
     if not texts:
         raise ValueError("need at least one text")
@@ -82,18 +64,6 @@ def generate_from_text(model, texts, num_frames=40, encoder=None):
 
 
 # ------------------------------------------------------------------ the learned filling baseline (Table 3)
-def train_and_save_filler(dataset="coma", steps=None, seed=0, out=None, progress=True):
-    """Train the bidirectional-LSTM filler (Berson et al.) and save it as lstm_filler_<dataset>."""
-    data.check_dataset_name(dataset)
-    cfg = lstm_filler.LSTMFillerTraining(dataset=dataset, seed=seed)
-    if steps:
-        cfg = replace(cfg, steps=steps)
-    model, history = lstm_filler.train_lstm_filler(cfg, progress=progress)
-    return save_checkpoint(out or f"lstm_filler_{dataset}", model, "lstm_filler", asdict(model.config),
-                           training=asdict(cfg), normalizer=model.normalizer.to_dict(), history=history,
-                           torch_version=torch.__version__)
-
-
 def load_filler(dataset="coma", checkpoint=None):
     """Load the shipped LSTM filler of a dataset (sha256 checked)."""
     data.check_dataset_name(dataset)
@@ -106,7 +76,6 @@ def load_filler(dataset="coma", checkpoint=None):
 @torch.no_grad()
 def lstm_fill(sequences, known, filler=None, dataset="coma", seed=0):
     """Fill the unknown frames with the LSTM filler; (n, F, 68, 3) float32 mm, known frames kept exactly."""
-    from .inpainting import check_fill_input, keep_known
     x, mask = check_fill_input(sequences, known)
     filler = filler or load_filler(dataset)
     xn = torch.as_tensor(filler.normalizer.normalize(x))

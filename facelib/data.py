@@ -510,3 +510,12 @@ class LandmarkNormalizer:
     @classmethod
     def from_dict(cls, d):
         return cls(np.asarray(d["mean_shape"], dtype=np.float32), float(d["scale"]))
+
+
+def check_class_names(meta_names, dataset, classifier_type, checkpoint):
+    """A classifier must predict exactly the classes of the dataset it is used with."""
+    expected = load_dataset(dataset, "train").class_names(classifier_type)
+    if tuple(meta_names) != tuple(expected):
+        raise ValueError(f"checkpoint {checkpoint} predicts {list(meta_names)}, but dataset {dataset!r} "
+                         f"(type {classifier_type}) has classes {list(expected)}")
+    return expected

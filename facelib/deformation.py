@@ -22,19 +22,16 @@ Checkpoints are ``deform_<method>_<split>``; :func:`deform` uses ``deform_ours_i
 from __future__ import annotations
 
 import json
-import math
 import time
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass
 
 import numpy as np
 import torch
-from tqdm import tqdm
 
 from . import data, metrics
-from .checkpoints import checkpoint_paths, load_checkpoint, save_checkpoint
+from .checkpoints import checkpoint_paths, load_checkpoint
 from .face import template as tpl
 from .models import coma, deformer, linear_deformer
-from .training_log import TrainingLog
 
 DATASET = "coma"  # §6: the deformation experiments use CoMA
 HELD_OUT_EXPRESSIONS = ("high_smile", "mouth_open", "mouth_side")  # our choice (the paper does not say)
@@ -111,77 +108,14 @@ def build_model(method):
     return module.build(asdict(model_config))
 
 
-@dataclass(frozen=True)
-class DeformationTraining:
-    """How the deformation networks are trained (S2D: Adam, lr 1e-3, batch 16; the rest our choice)."""
-
-    method: str = "ours"
-    split: str = "identity"
-    steps: int = 4000  # our choice: 6 to 14 minutes on one core for the spiral networks (chapter 09)
-    sequences_per_batch: int = 4
-    frames_per_batch: int = 4  # frames of each sequence in a batch: 16 meshes per step, S2D's batch
-    frames_per_sequence: int = 10  # frames kept per training sequence
-    lr: float = 1e-3  # S2D
-    final_lr_fraction: float = 0.1  # cosine decay to lr x this (our choice)
-    max_sequences: int | None = None  # fast mode: a subset of the training sequences
-    seed: int = 0
-
-
-def fast_training(cfg):
-    """The fast-mode version of a training config (tests and FACELIB_FAST chapters)."""
-    return replace(cfg, steps=20, max_sequences=16, frames_per_sequence=4)
-
-
 def loss_weights():
     """S2D's per-vertex weights on the template (models/deformer.landmark_weights)."""
     t = tpl.get_template()
     return torch.as_tensor(deformer.landmark_weights(t.vertices, t.landmark_index))
 
 
-def train_deformation(cfg=DeformationTraining(), progress=True, log_every=50):
-    """Train one method on one split; returns (model, history)."""
-    check_method(cfg.method)
-    train, _ = split_datasets(cfg.split)
-    if cfg.max_sequences:
-        train = train.subset(np.random.default_rng(cfg.seed).permutation(len(train))[:cfg.max_sequences])
-    pairs = make_pairs(train, cfg.frames_per_sequence, seed=cfg.seed)
-    neutral, dl, dm = (torch.as_tensor(a) for a in (pairs.neutral, pairs.delta_landmarks, pairs.delta_mesh))
-    weights = loss_weights()
-    torch.manual_seed(cfg.seed)
-    model = build_model(cfg.method)
-    opt = torch.optim.Adam(model.parameters(), lr=cfg.lr)
-    gen = torch.Generator().manual_seed(cfg.seed)
-    log = TrainingLog(cfg.steps, log_every, "loss", "error_mm")
-    model.train()
-    k = pairs.delta_mesh.shape[1]
-    for step in tqdm(range(cfg.steps), desc=f"train deformer ({cfg.method}, {cfg.split} split)", disable=not progress):
-        decay = 0.5 * (1 + math.cos(math.pi * step / max(cfg.steps - 1, 1)))
-        for g in opt.param_groups:
-            g["lr"] = cfg.lr * (cfg.final_lr_fraction + (1 - cfg.final_lr_fraction) * decay)
-        seq = torch.randint(0, len(pairs), (cfg.sequences_per_batch,), generator=gen)
-        frame = torch.stack([torch.randperm(k, generator=gen)[:cfg.frames_per_batch] for _ in seq])
-        target = dm[seq[:, None], frame]
-        predicted = model(neutral[seq], dl[seq[:, None], frame])
-        loss = deformer.deformation_loss(predicted, target, weights)
-        opt.zero_grad(set_to_none=True)
-        loss.backward()
-        opt.step()
-        log.add(step, loss=loss.item(), error_mm=(predicted - target).norm(dim=-1).mean().item())
-    return model.eval(), log.history
-
-
 def checkpoint_name(method, split):
     return f"deform_{check_method(method)}_{check_split(split)}"
-
-
-def train_and_save_deformation(cfg=DeformationTraining(), name=None, progress=True):
-    """Train and save as deform_<method>_<split> in data/checkpoints."""
-    model, history = train_deformation(cfg, progress=progress)
-    module = METHODS[cfg.method][0]
-    return save_checkpoint(name or checkpoint_name(cfg.method, cfg.split), model, "deformer",
-                           module.config_dict(model), method=cfg.method, split=cfg.split,
-                           held_out_expressions=list(HELD_OUT_EXPRESSIONS), training=asdict(cfg),
-                           history=history, torch_version=torch.__version__)
 
 
 def load_deformer(method="ours", split="identity", checkpoint=None):

@@ -95,22 +95,13 @@ def check_sequences(sequences):
     return x
 
 
-def check_class_names(meta_names, dataset, classifier_type, checkpoint):
-    """A classifier must predict exactly the classes of the dataset it is used with."""
-    expected = data.load_dataset(dataset, "train").class_names(classifier_type)
-    if tuple(meta_names) != tuple(expected):
-        raise ValueError(f"checkpoint {checkpoint} predicts {list(meta_names)}, but dataset {dataset!r} "
-                         f"(type {classifier_type}) has classes {list(expected)}")
-    return expected
-
-
 def load_evaluator(dataset="coma", classifier_type="I", name=None):
     """Load the shipped IC ic_<dataset>_<type> (sha256 checked) and the training features for FID."""
     data.check_dataset_name(dataset)
     data.check_classifier_type(classifier_type)
     name = name or f"ic_{dataset}_{classifier_type}"
     model, meta = load_checkpoint(name, "evaluator", lambda c: LSTMClassifier(**c))
-    names = check_class_names(meta["class_names"], dataset, classifier_type, name)
+    names = data.check_class_names(meta["class_names"], dataset, classifier_type, name)
     evaluator = Evaluator(model, dataset, classifier_type, names, np.zeros((0, len(names))))
     evaluator.reference_features = evaluator.features(data.load_dataset(dataset, "train").landmarks)
     return evaluator

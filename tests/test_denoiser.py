@@ -8,6 +8,7 @@ from facelib import data, tasks
 from facelib.__main__ import main
 from facelib.checkpoints import load_checkpoint, save_checkpoint
 from facelib.models.denoiser import Denoiser, DenoiserConfig
+from facelib.training import Draws, swap_anatomy, training_anatomies
 
 SMALL = DenoiserConfig(width=32, depth=2, heads=2, ff=64)
 PLAIN = DenoiserConfig(width=32, depth=2, heads=2, ff=64, gaussian_skip=False)  # output layer not zeroed
@@ -143,14 +144,13 @@ def test_denoiser_rejects_bad_shapes(shape, t_shape, message):
 
 
 def test_anatomy_augmentation_keeps_the_motion_and_swaps_the_neutral_face(coma_train):
-    from facelib.train import swap_anatomy, training_anatomies
     pool = torch.as_tensor(training_anatomies(("coma", "bu")))
     assert pool.shape == (9 + 81, 68, 3)
     x = torch.as_tensor(coma_train.landmarks[:6])
     own = torch.as_tensor(np.stack([coma_train.neutral_landmarks(int(s)) for s in coma_train.subjects[:6]]))
-    gen = torch.Generator().manual_seed(0)
-    assert torch.equal(swap_anatomy(x, own, pool, 0.0, gen), x)
-    swapped = swap_anatomy(x, own, pool, 1.0, gen)
+    draws = Draws(torch.Generator().manual_seed(0), len(x))
+    assert torch.equal(swap_anatomy(x, own, pool, 0.0, draws), x)
+    swapped = swap_anatomy(x, own, pool, 1.0, draws)
     shift = swapped - x
     assert torch.allclose(shift, shift[:, :1].expand_as(shift), atol=1e-4)  # the same offset in every frame
     new_neutral = own + shift[:, 0]

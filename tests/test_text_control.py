@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from facelib import baselines, config, data, descriptions, evaluation, guidance, tasks, text
-from facelib.train import description_embeddings
+from facelib.text import description_embeddings
 from facelib.diffusion import GaussianDiffusion, linear_betas
 from facelib.guidance import (OptimisationGuidance, contrastive_text_score, denoised_text_score, nearest_wording,
                               text_score)

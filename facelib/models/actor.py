@@ -17,11 +17,8 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import torch
 from torch import nn
-from tqdm import tqdm
 
-from .. import data
 from .bit import BiT, sinusoidal_embedding
-from ..training_log import TrainingLog
 
 
 @dataclass(frozen=True)
@@ -70,45 +67,6 @@ class ActorCVAE(nn.Module):
         z = torch.randn(len(labels), self.config.width, generator=gen)
         neutral = self.neutrals[torch.randint(0, len(self.neutrals), (len(labels),), generator=gen)]
         return (self.decode(z, labels, num_frames) * self.scale + neutral[:, None]).numpy().astype(np.float32)
-
-
-@dataclass(frozen=True)
-class ActorTraining:
-    dataset: str = "coma"
-    steps: int = 3000  # our choice: about 10 minutes on a CPU core
-    batch_size: int = 64
-    lr: float = 1e-3  # our choice: at 2e-4 the decoder underfits in this budget and ignores the label
-    kl_weight: float = 1e-3  # our choice (ACTOR: 1e-5 with its loss scaling); see chapter 05
-    seed: int = 0
-
-
-def train_actor(cfg=ActorTraining(), progress=True, log_every=50):
-    """Train the CVAE; returns (ActorCVAE, history)."""
-    torch.manual_seed(cfg.seed)
-    gen = torch.Generator().manual_seed(cfg.seed)
-    train = data.load_dataset(cfg.dataset, "train")
-    delta = torch.as_tensor(train.delta_landmarks())
-    labels = torch.as_tensor(train.labels)
-    model = ActorCVAE(ActorConfig(num_classes=len(train.label_names), num_neutrals=len(np.unique(train.subjects))))
-    model.scale.fill_(float(delta.std()))
-    model.neutrals.copy_(torch.as_tensor(train.subject_neutrals()))
-    x_all = delta / model.scale
-    opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr)
-    log = TrainingLog(cfg.steps, log_every, "reconstruction", "kl")
-    model.train()
-    for step in tqdm(range(cfg.steps), desc=f"train ACTOR ({cfg.dataset})", disable=not progress):
-        idx = torch.randint(0, len(x_all), (cfg.batch_size,), generator=gen)
-        x, y = x_all[idx], labels[idx]
-        mu, logvar = model.encode(x, y)
-        z = mu + (0.5 * logvar).exp() * torch.randn(mu.shape, generator=gen)
-        rec = ((model.decode(z, y, x.shape[1]) - x) ** 2).mean()
-        kl = (0.5 * (mu ** 2 + logvar.exp() - 1 - logvar)).sum(1).mean()
-        loss = rec + cfg.kl_weight * kl
-        opt.zero_grad(set_to_none=True)
-        loss.backward()
-        opt.step()
-        log.add(step, reconstruction=rec.item(), kl=kl.item())
-    return model.eval(), log.history
 
 
 def config_dict(model):

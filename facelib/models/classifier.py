@@ -12,7 +12,6 @@ from __future__ import annotations
 import numpy as np
 import torch
 from torch import nn
-from tqdm import tqdm
 
 INPUTS = ("motion", "absolute")
 
@@ -65,32 +64,3 @@ class LSTMClassifier(nn.Module):
         return torch.cat([self.forward(x[i:i + batch_size]).argmax(1) for i in range(0, len(x), batch_size)]).numpy()
 
 
-def train_classifier(landmarks, targets, num_classes, epochs=30, batch_size=32, lr=1e-3, seed=0,
-                     inputs="motion", hidden=128, progress=True):
-    """Train an :class:`LSTMClassifier` with Adam and cross-entropy; returns (model, loss per epoch)."""
-    x = torch.as_tensor(np.asarray(landmarks), dtype=torch.float32)
-    y = torch.as_tensor(np.asarray(targets), dtype=torch.long)
-    if len(x) != len(y):
-        raise ValueError(f"{len(x)} sequences but {len(y)} targets")
-    if y.min() < 0 or y.max() >= num_classes:
-        raise ValueError(f"targets must be in [0, {num_classes}), got range [{int(y.min())}, {int(y.max())}]")
-    torch.manual_seed(seed)
-    gen = torch.Generator().manual_seed(seed)
-    model = LSTMClassifier(num_classes, hidden=hidden, num_landmarks=x.shape[2], inputs=inputs)
-    model.fit_normalization(x)
-    opt = torch.optim.Adam(model.parameters(), lr=lr)
-    losses = []
-    for _ in tqdm(range(epochs), desc="train IC", disable=not progress):
-        model.train()
-        perm = torch.randperm(len(x), generator=gen)
-        total = 0.0
-        for i in range(0, len(x), batch_size):
-            b = perm[i:i + batch_size]
-            loss = nn.functional.cross_entropy(model(x[b]), y[b])
-            opt.zero_grad()
-            loss.backward()
-            opt.step()
-            total += loss.item() * len(b)
-        losses.append(total / len(x))
-    model.eval()
-    return model, np.array(losses)

@@ -22,10 +22,8 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import torch
 from torch import nn
-from tqdm import tqdm
 
-from .. import data, srvf
-from ..training_log import TrainingLog
+from .. import srvf
 
 
 @dataclass(frozen=True)
@@ -106,20 +104,6 @@ class Motion3DGAN(nn.Module):
         return motion.numpy().astype(np.float32)
 
 
-@dataclass(frozen=True)
-class Motion3DGANTraining:
-    dataset: str = "coma"
-    steps: int = 1500  # generator steps (our choice: a few minutes on a CPU core)
-    critic_steps: int = 5  # n_critic (WGAN-GP default; not given)
-    batch_size: int = 64
-    lr: float = 1e-4  # paper
-    gp_weight: float = 10.0  # lambda of Eq. 4 (WGAN-GP default; not given)
-    adversarial_weight: float = 1.0  # alpha_1 (paper)
-    reconstruction_weight: float = 10.0  # alpha_2 (paper)
-    smoothing: float = 1.0  # our choice: Gaussian sigma (frames) applied before the SRVF, see prepare()
-    seed: int = 0
-
-
 def smooth_in_time(motion, sigma):
     """Gaussian smoothing (sigma in frames, edges replicated) of motions (n, F, d) along F."""
     if sigma <= 0:
@@ -144,62 +128,6 @@ def prepare(train, smoothing=0.0):
     e2n = torch.as_tensor(train.kinds == train.kind_names.index("E2N"))
     motion = torch.where(e2n[:, None, None], motion.flip(1), motion)
     return srvf.to_srvf(smooth_in_time(motion, smoothing))
-
-
-def train_motion3dgan(cfg=Motion3DGANTraining(), progress=True, log_every=50):
-    """Train the WGAN-GP (Eq. 4-7); returns (Motion3DGAN, history)."""
-    torch.manual_seed(cfg.seed)
-    gen = torch.Generator().manual_seed(cfg.seed)
-    train = data.load_dataset(cfg.dataset, "train")
-    k = len(train.label_names)
-    model = Motion3DGAN(Motion3DGANConfig(num_classes=k, num_frames=train.landmarks.shape[1]),
-                        num_neutrals=len(np.unique(train.subjects)))
-    q, length = prepare(train, cfg.smoothing)
-    p = srvf.reference_point(q)
-    real = srvf.log_map(q, p).float()
-    labels = torch.as_tensor(train.labels)
-    model.reference.copy_(p.float())
-    model.tangent_scale.fill_(float(real.std()))
-    model.arc_length.copy_(torch.stack([length[labels == y].mean() for y in range(k)]).float())
-    model.e2n_fraction.copy_(torch.as_tensor([np.mean(train.kinds[train.labels == y] == 1) for y in range(k)]).float())
-    model.neutrals.copy_(torch.as_tensor(train.subject_neutrals()))
-    critic = Critic(model.config)
-    opt_g = torch.optim.Adam(model.generator.parameters(), lr=cfg.lr, betas=(0.5, 0.9))
-    opt_d = torch.optim.Adam(critic.parameters(), lr=cfg.lr, betas=(0.5, 0.9))
-    by_class = [torch.nonzero(labels == y)[:, 0] for y in range(k)]
-    scale = model.tangent_scale
-    log = TrainingLog(cfg.steps, log_every, "critic", "generator")
-
-    def fake_batch(y):
-        z = torch.randn(len(y), model.config.noise_dim, generator=gen)
-        return model.tangent(z, nn.functional.one_hot(y, k).float()) / scale
-
-    for step in tqdm(range(cfg.steps), desc=f"train Motion3DGAN ({cfg.dataset})", disable=not progress):
-        for _ in range(cfg.critic_steps):
-            idx = torch.randint(0, len(real), (cfg.batch_size,), generator=gen)
-            y, onehot = labels[idx], nn.functional.one_hot(labels[idx], k).float()
-            u_real = real[idx] / scale
-            with torch.no_grad():
-                u_fake = fake_batch(y)
-            tau = torch.rand(len(idx), 1, 1, generator=gen)
-            u_mix = ((1 - tau) * u_real + tau * u_fake).requires_grad_(True)
-            grad = torch.autograd.grad(critic(u_mix, onehot).sum(), u_mix, create_graph=True)[0]
-            penalty = ((grad.flatten(1).norm(dim=1) - 1) ** 2).mean()
-            loss_d = critic(u_fake, onehot).mean() - critic(u_real, onehot).mean() + cfg.gp_weight * penalty
-            opt_d.zero_grad()
-            loss_d.backward()
-            opt_d.step()
-        idx = torch.randint(0, len(real), (cfg.batch_size,), generator=gen)
-        y = labels[idx]
-        partner = torch.stack([by_class[int(c)][torch.randint(0, len(by_class[int(c)]), (1,), generator=gen)][0] for c in y])
-        u_fake = fake_batch(y)
-        loss_g = (-cfg.adversarial_weight * critic(u_fake, nn.functional.one_hot(y, k).float()).mean()
-                  + cfg.reconstruction_weight * (u_fake - real[partner] / scale).abs().mean())
-        opt_g.zero_grad()
-        loss_g.backward()
-        opt_g.step()
-        log.add(step, critic=loss_d.item(), generator=loss_g.item())
-    return model.eval(), log.history
 
 
 def config_dict(model):

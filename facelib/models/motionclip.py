@@ -22,10 +22,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import torch
 from torch import nn
-from tqdm import tqdm
 
-from .. import data
-from ..training_log import TrainingLog
 from .bit import sinusoidal_embedding
 
 
@@ -67,43 +64,6 @@ class TextToMotion(nn.Module):
         if e.ndim != 2 or e.shape[1] != self.config.embedding_dim:
             raise ValueError(f"text embeddings must be (n, {self.config.embedding_dim}), got {tuple(e.shape)}")
         return (self.decode(e, num_frames) * self.scale + self.neutral).numpy().astype(np.float32)
-
-
-@dataclass(frozen=True)
-class MotionClipTraining:
-    dataset: str = "coma+bu"  # paper §5.2
-    steps: int = 3000  # our choice: a few minutes on 2 CPU cores; the loss has flattened by then
-    batch_size: int = 64
-    lr: float = 1e-3
-    seed: int = 0
-
-
-def train_motionclip(cfg=MotionClipTraining(), progress=True, log_every=50, encoder=None):
-    """Train the text-to-motion decoder; returns (TextToMotion, history)."""
-    from ..text import get_encoder
-    from ..train import description_embeddings
-    torch.manual_seed(cfg.seed)
-    gen = torch.Generator().manual_seed(cfg.seed)
-    train = data.load_dataset(cfg.dataset, "train")
-    table = description_embeddings(train, encoder or get_encoder())
-    delta = torch.as_tensor(train.delta_landmarks())
-    labels, kinds = torch.as_tensor(train.labels).long(), torch.as_tensor(train.kinds).long()
-    model = TextToMotion(MotionClipConfig(embedding_dim=table.shape[-1]))
-    model.scale.fill_(float(delta.std()))
-    model.neutral.copy_(torch.as_tensor(train.subject_neutrals().mean(0)))
-    x_all = delta / model.scale
-    opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr)
-    log = TrainingLog(cfg.steps, log_every, "reconstruction")
-    model.train()
-    for step in tqdm(range(cfg.steps), desc=f"train MotionCLIP-style ({cfg.dataset})", disable=not progress):
-        idx = torch.randint(0, len(x_all), (cfg.batch_size,), generator=gen)
-        choice = torch.randint(0, table.shape[2], (cfg.batch_size,), generator=gen)
-        loss = ((model.decode(table[labels[idx], kinds[idx], choice], x_all.shape[1]) - x_all[idx]) ** 2).mean()
-        opt.zero_grad(set_to_none=True)
-        loss.backward()
-        opt.step()
-        log.add(step, reconstruction=loss.item())
-    return model.eval(), log.history
 
 
 def config_dict(model):

@@ -1,0 +1,484 @@
+"""One recipe per trained model: its settings (facelib/config.py), its data, its model and the loss of a batch.
+
+A recipe is what :func:`facelib.training.loop.fit` needs: ``name``, ``settings``, ``size`` (number of
+training examples), ``build(generator)`` (a fresh model, data-dependent buffers fitted),
+``objectives(model)`` (the losses to optimise; one, except for the GAN) and ``metadata(model)`` (what
+its checkpoint records besides the weights).  Every random draw of a loss goes through the step's
+:class:`~facelib.training.loop.Draws`, so that distributed training sees the draws of one process.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict
+
+import numpy as np
+import torch
+from torch import nn
+
+from .. import config, data, deformation, srvf
+from ..diffusion import GaussianDiffusion, named_betas
+from ..inpainting import FILL_SETTINGS, fill_masks
+from ..models import actor, lstm_filler, motion3dgan, motionclip
+from ..models.classifier import LSTMClassifier
+from ..models.denoiser import Denoiser, DenoiserConfig
+from ..models.deformer import deformation_loss
+from ..models.noisy_classifier import NoisyClassifier, NoisyClassifierConfig, NoisyTextHead, TextHeadConfig
+from ..text import MODEL_NAME, description_embeddings, get_encoder
+from .loop import Draws, Objective
+
+
+class Recipe:
+    """The parts every recipe shares: one objective, the model's own loss, metadata from the settings."""
+
+    name = "model"
+    kind = "model"  # the checkpoint kind
+    distributed = True  # False: its draws are not per example, so it trains on one process only
+    device = torch.device("cpu")  # set by the loop before build
+
+    def objectives(self, model):
+        return [Objective(model, lambda draws: self.loss(model, draws))]
+
+    def model_config(self, model):
+        return asdict(model.config)
+
+    def metadata(self, model):
+        return {"training": asdict(self.settings), "torch_version": torch.__version__}
+
+    def checkpoint_name(self):
+        return f"{self.kind}_{self.settings.dataset}"
+
+
+# ------------------------------------------------------------------------------------------------ the DDPM
+def training_anatomies(datasets):
+    """Neutral landmarks (K, 68, 3) in mm of every training subject of the given datasets."""
+    return np.concatenate([data.load_dataset(name, "train").subject_neutrals() for name in datasets])
+
+
+def swap_anatomy(x, own, pool, swap, draws):
+    """Anatomy augmentation (our addition): x (B, F, 68, 3) minus each sequence's own neutral frame ``own``
+    (B, 68, 3), plus a random neutral frame of ``pool`` (K, 68, 3), with probability ``swap``.
+
+    CoMA-like data has only 9 training faces, so a DDPM trained on it alone can only draw those 9
+    anatomies; the motion is kept, the anatomy is new.  Only training splits enter the pool."""
+    other = pool[draws.randint(0, len(pool))]
+    keep = draws.rand() >= swap
+    shift = torch.where(keep[:, None, None], torch.zeros_like(own), other - own)
+    return x + shift[:, None]
+
+
+class DenoiserRecipe(Recipe):
+    """eps_theta trained with the simple loss of Eq. 8 on anatomy-augmented sequences."""
+
+    kind = "denoiser"
+
+    def __init__(self, settings=config.DenoiserTraining(), model_config=None):
+        self.settings = settings
+        self.model_config_ = model_config or DenoiserConfig(num_diffusion_steps=settings.num_diffusion_steps,
+                                                             schedule=settings.schedule)
+        if (self.model_config_.num_diffusion_steps, self.model_config_.schedule) != (settings.num_diffusion_steps,
+                                                                                     settings.schedule):
+            raise ValueError("the denoiser's schedule must match the training schedule")
+        self.name = f"denoiser ({settings.dataset})"
+        self.variable = not isinstance(settings.num_frames, int)
+        train = data.load_dataset(settings.dataset, "train", num_frames=settings.num_frames)
+        self.normalizer = data.LandmarkNormalizer.fit(train)
+        self.lengths = train.lengths
+        x = torch.as_tensor(self.normalizer.normalize(train.landmarks))
+        self.mask_all = torch.arange(x.shape[1])[None, :] < torch.as_tensor(train.lengths)[:, None]
+        self.x_all = x * self.mask_all[:, :, None, None]
+        self.own = torch.as_tensor(train.sequence_neutrals()) / self.normalizer.scale
+        pool = training_anatomies(settings.anatomy_pool) if settings.anatomy_swap > 0 else np.zeros((1, 68, 3))
+        self.pool = (torch.as_tensor(pool) / self.normalizer.scale).float()
+        self.size = len(self.x_all)
+        self.diffusion = GaussianDiffusion(named_betas(settings.schedule, settings.num_diffusion_steps))
+
+    def build(self, generator):
+        model = Denoiser(self.model_config_)
+        # the Gaussian prior of the skip connection sees augmented frames too
+        swapped = swap_anatomy(self.x_all, self.own, self.pool, self.settings.anatomy_swap, Draws(generator, self.size))
+        model.fit_prior(torch.cat([seqs[i, :n] for seqs in (self.x_all, swapped) for i, n in enumerate(self.lengths)]))
+        for name in ("x_all", "mask_all", "own", "pool"):
+            setattr(self, name, getattr(self, name).to(self.device))
+        return model
+
+    def loss(self, model, draws):
+        idx = draws.examples(self.size)
+        x0 = swap_anatomy(self.x_all[idx], self.own[idx], self.pool, self.settings.anatomy_swap, draws)
+        x0 = x0 * self.mask_all[idx][:, :, None, None]
+        t = draws.randint(1, self.settings.num_diffusion_steps + 1)
+        loss = self.diffusion.training_loss(model, x0, t=t, eps=draws.randn(*x0.shape[1:]),
+                                            mask=self.mask_all[idx] if self.variable else None)
+        return loss, {"loss": loss.item()}
+
+    def metadata(self, model):
+        training = asdict(self.settings) | {"model": asdict(model.config)}
+        training["num_frames"] = self.settings.num_frames if not self.variable else list(self.settings.num_frames)
+        return {"training": training, "normalizer": self.normalizer.to_dict(), "torch_version": torch.__version__,
+                "data_dir": str(config.SYNTHETIC_DIR.name)}
+
+    def checkpoint_name(self):
+        return f"denoiser_{self.settings.dataset}" + ("_var" if self.variable else "")
+
+
+# --------------------------------------------------------------------------- networks that read noisy x_t
+class _NoisyRecipe(Recipe):
+    """A network trained on x_t = q_sample(x_0, t), t ~ U{0..T} (t = 0 is the clean sequence), in the
+    denoiser's normalised space (the normaliser is fitted on the same split)."""
+
+    def _prepare(self, settings):
+        self.settings = settings
+        data.check_dataset_name(settings.dataset)
+        self.train = data.load_dataset(settings.dataset, "train")
+        self.normalizer = data.LandmarkNormalizer.fit(self.train)
+        self.x_all = torch.as_tensor(self.normalizer.normalize(self.train.landmarks))
+        self.size = len(self.x_all)
+        self.diffusion = GaussianDiffusion(named_betas(settings.schedule, settings.num_diffusion_steps))
+
+    def noisy_batch(self, model, draws):
+        """(model(x_t, t), indices) for a batch of training sequences."""
+        idx = draws.examples(self.size)
+        t = draws.randint(0, self.settings.num_diffusion_steps + 1)
+        x0 = self.x_all.to(self.device)[idx]
+        return model(self.diffusion.q_sample(x0, t, eps=draws.randn(*x0.shape[1:])), t.float()), idx
+
+    def metadata(self, model):
+        return {"training": asdict(self.settings) | {"model": asdict(model.config)},
+                "normalizer": self.normalizer.to_dict(), "torch_version": torch.__version__}
+
+
+class GuideRecipe(_NoisyRecipe):
+    """p_phi(y | x_t, t) of Alg. 1 and 4: cross-entropy on noisy sequences."""
+
+    kind = "guide"
+
+    def __init__(self, settings=config.GuideTraining(), model_config=None):
+        data.check_classifier_type(settings.classifier_type)
+        self._prepare(settings)
+        self.name = f"guide ({settings.dataset}, type {settings.classifier_type})"
+        self.class_names = list(self.train.class_names(settings.classifier_type))
+        self.targets = torch.as_tensor(self.train.targets(settings.classifier_type))
+        self.model_config_ = model_config or NoisyClassifierConfig(num_classes=len(self.class_names))
+
+    def build(self, generator):
+        return NoisyClassifier(self.model_config_)
+
+    def loss(self, model, draws):
+        logits, idx = self.noisy_batch(model, draws)
+        y = self.targets.to(self.device)[idx]
+        loss = nn.functional.cross_entropy(logits, y)
+        return loss, {"loss": loss.item(), "accuracy": (logits.argmax(1) == y).float().mean().item()}
+
+    def metadata(self, model):
+        return super().metadata(model) | {"class_names": self.class_names}
+
+    def checkpoint_name(self):
+        return f"guide_{self.settings.dataset}_{self.settings.classifier_type}"
+
+
+def text_head_loss(output, table, labels, kinds, choice, contrastive_weight=1.0, temperature=0.05):
+    """The loss of the text head for outputs (B, D), description table (labels, 2, K, D) and, per
+    sequence, its label, order (kind) and the index of its drawn description.
+
+    * MotionCLIP's cosine term (§5.2): 1 - cos(output, E(c)), c = the drawn description.
+    * Our contrastive term (CLIP's InfoNCE, one direction): softmax over the descriptions *in the
+      same wording* of every label (and, for an enriched sentence, of both orders) at temperature
+      tau; the cross-entropy of the right one.  The cosine alone is nearly satisfied by pointing
+      at the average description of a label: the two orders' sentences have a cosine of about
+      0.97-0.99 for the encoder, so it never learns the order.
+
+    Returns (loss, cosine term, accuracy of the contrastive choice)."""
+    out = nn.functional.normalize(output, dim=-1)
+    candidates = table[:, :, choice].permute(2, 0, 1, 3)  # (B, labels, 2, D): the same wording for every class
+    logits = torch.einsum("bd,blkd->blk", out, candidates) / temperature
+    cosine = 1 - logits[torch.arange(len(out), device=out.device), labels, kinds].mean() * temperature
+    enriched = (table[0, 0, choice] != table[0, 1, choice]).any(-1)  # the order is in the words
+    flat = torch.where(enriched[:, None], logits.flatten(1), torch.cat([logits[:, :, 0], logits[:, :, 0]], 1)
+                       .masked_fill(torch.arange(2 * table.shape[0], device=out.device) >= table.shape[0], -torch.inf))
+    target = torch.where(enriched, labels * 2 + kinds, labels)
+    contrastive = nn.functional.cross_entropy(flat, target)
+    return cosine + contrastive_weight * contrastive, cosine, (flat.argmax(1) == target).float().mean()
+
+
+class TextHeadRecipe(_NoisyRecipe):
+    """BiT(x_t, t) of Alg. 2: cos(BiT(x_t, t), E(c)) high for c a random training description of x_0
+    (:func:`text_head_loss`)."""
+
+    kind = "text_head"
+
+    def __init__(self, settings=config.TextHeadTraining(), model_config=None, encoder=None):
+        self._prepare(settings)
+        self.name = f"text head ({settings.dataset})"
+        self.table = description_embeddings(self.train, encoder or get_encoder())
+        self.labels, self.kinds = torch.as_tensor(self.train.labels).long(), torch.as_tensor(self.train.kinds).long()
+        self.model_config_ = model_config or TextHeadConfig()
+
+    def build(self, generator):
+        return NoisyTextHead(self.model_config_)
+
+    def loss(self, model, draws):
+        output, idx = self.noisy_batch(model, draws)
+        choice = draws.randint(0, self.table.shape[2])
+        table, labels, kinds = (a.to(self.device) for a in (self.table, self.labels, self.kinds))
+        loss, cosine, hit = text_head_loss(output, table, labels[idx], kinds[idx], choice,
+                                           self.settings.contrastive_weight, self.settings.temperature)
+        return loss, {"loss": loss.item(), "cosine_loss": cosine.item(), "accuracy": hit.item()}
+
+    def metadata(self, model):
+        return super().metadata(model) | {"text_encoder": MODEL_NAME, "class_names": list(self.train.label_names)}
+
+    def checkpoint_name(self):
+        return f"guide_{self.settings.dataset}_text"
+
+
+# ------------------------------------------------------------------------------------ the evaluation's IC
+class EvaluatorRecipe(Recipe):
+    """The independent classifier (IC, §5): an LSTM on clean sequences, cross-entropy, epochs."""
+
+    kind = "evaluator"
+
+    def __init__(self, settings=config.EvaluatorTraining()):
+        data.check_classifier_type(settings.classifier_type)
+        self.settings = settings
+        self.name = f"IC ({settings.dataset}, type {settings.classifier_type}, {settings.inputs})"
+        train = data.load_dataset(settings.dataset, "train")
+        self.class_names = list(train.class_names(settings.classifier_type))
+        self.x = torch.as_tensor(train.landmarks, dtype=torch.float32)
+        self.y = torch.as_tensor(train.targets(settings.classifier_type), dtype=torch.long)
+        self.size = len(self.x)
+
+    def build(self, generator):
+        s = self.settings
+        model = LSTMClassifier(len(self.class_names), hidden=s.hidden, num_landmarks=68, inputs=s.inputs)
+        model.fit_normalization(self.x)
+        return model
+
+    def loss(self, model, draws):
+        idx = draws.examples(self.size)
+        loss = nn.functional.cross_entropy(model(self.x[idx].to(self.device)), self.y[idx].to(self.device))
+        return loss, {"loss": loss.item()}
+
+    def model_config(self, model):
+        return {"num_classes": len(self.class_names), "hidden": self.settings.hidden, "num_landmarks": 68,
+                "inputs": self.settings.inputs}
+
+    def metadata(self, model):
+        return super().metadata(model) | {"class_names": self.class_names}
+
+    def checkpoint_name(self):
+        return f"ic_{self.settings.dataset}_{self.settings.classifier_type}"
+
+
+# -------------------------------------------------------------------------------------------- baselines
+class _BaselineRecipe(Recipe):
+    def _prepare(self, settings, name):
+        data.check_dataset_name(settings.dataset)
+        self.settings, self.kind = settings, name
+        self.name = f"{name} ({settings.dataset})"
+        self.train = data.load_dataset(settings.dataset, "train")
+
+    def metadata(self, model):
+        return super().metadata(model) | {"label_names": list(self.train.label_names)}
+
+
+class ActorRecipe(_BaselineRecipe):
+    """The ACTOR-style CVAE: reconstruction + kl_weight x KL."""
+
+    def __init__(self, settings=config.ActorTraining()):
+        self._prepare(settings, "actor")
+        self.delta = torch.as_tensor(self.train.delta_landmarks())
+        self.labels = torch.as_tensor(self.train.labels)
+        self.size = len(self.delta)
+
+    def build(self, generator):
+        model = actor.ActorCVAE(actor.ActorConfig(num_classes=len(self.train.label_names),
+                                                  num_neutrals=len(np.unique(self.train.subjects))))
+        model.scale.fill_(float(self.delta.std()))
+        model.neutrals.copy_(torch.as_tensor(self.train.subject_neutrals()))
+        self.x_all = self.delta / model.scale
+        return model
+
+    def loss(self, model, draws):
+        idx = draws.examples(self.size)
+        x, y = self.x_all[idx], self.labels[idx]
+        mu, logvar = model.encode(x, y)
+        z = mu + (0.5 * logvar).exp() * draws.randn(mu.shape[1])
+        rec = ((model.decode(z, y, x.shape[1]) - x) ** 2).mean()
+        kl = (0.5 * (mu ** 2 + logvar.exp() - 1 - logvar)).sum(1).mean()
+        return rec + self.settings.kl_weight * kl, {"reconstruction": rec.item(), "kl": kl.item()}
+
+
+class MotionClipRecipe(_BaselineRecipe):
+    """The MotionCLIP-style decoder: text embedding -> motion, mean squared error."""
+
+    def __init__(self, settings=config.MotionClipTraining(), encoder=None):
+        self._prepare(settings, "motionclip")
+        self.table = description_embeddings(self.train, encoder or get_encoder())
+        self.delta = torch.as_tensor(self.train.delta_landmarks())
+        self.labels, self.kinds = torch.as_tensor(self.train.labels).long(), torch.as_tensor(self.train.kinds).long()
+        self.size = len(self.delta)
+
+    def build(self, generator):
+        model = motionclip.TextToMotion(motionclip.MotionClipConfig(embedding_dim=self.table.shape[-1]))
+        model.scale.fill_(float(self.delta.std()))
+        model.neutral.copy_(torch.as_tensor(self.train.subject_neutrals().mean(0)))
+        self.x_all = self.delta / model.scale
+        return model
+
+    def loss(self, model, draws):
+        idx = draws.examples(self.size)
+        choice = draws.randint(0, self.table.shape[2])
+        text = self.table[self.labels[idx], self.kinds[idx], choice]
+        loss = ((model.decode(text, self.x_all.shape[1]) - self.x_all[idx]) ** 2).mean()
+        return loss, {"reconstruction": loss.item()}
+
+
+class Motion3DGANRecipe(_BaselineRecipe):
+    """The Motion3DGAN-style WGAN-GP on SRVFs (Eq. 4-7 of Otberdout et al.): a critic and a generator."""
+
+    distributed = False  # the reconstruction partner of each example is drawn within its class
+
+    def __init__(self, settings=config.Motion3DGANTraining()):
+        self._prepare(settings, "motion3dgan")
+        self.num_classes = len(self.train.label_names)
+        q, self.length = motion3dgan.prepare(self.train, settings.smoothing)
+        self.reference = srvf.reference_point(q)
+        self.real = srvf.log_map(q, self.reference).float()
+        self.labels = torch.as_tensor(self.train.labels)
+        self.by_class = [torch.nonzero(self.labels == y)[:, 0] for y in range(self.num_classes)]
+        self.size = len(self.real)
+
+    def build(self, generator):
+        k, train = self.num_classes, self.train
+        model = motion3dgan.Motion3DGAN(motion3dgan.Motion3DGANConfig(num_classes=k, num_frames=train.landmarks.shape[1]),
+                                        num_neutrals=len(np.unique(train.subjects)))
+        model.reference.copy_(self.reference.float())
+        model.tangent_scale.fill_(float(self.real.std()))
+        model.arc_length.copy_(torch.stack([self.length[self.labels == y].mean() for y in range(k)]).float())
+        model.e2n_fraction.copy_(torch.as_tensor([np.mean(train.kinds[train.labels == y] == 1) for y in range(k)]).float())
+        model.neutrals.copy_(torch.as_tensor(train.subject_neutrals()))
+        self.critic = motion3dgan.Critic(model.config)
+        return model
+
+    def objectives(self, model):
+        return [Objective(self.critic, lambda d: self.critic_loss(model, d), self.settings.critic_steps),
+                Objective(model.generator, lambda d: self.generator_loss(model, d))]
+
+    def _fake(self, model, y, draws):
+        z = draws.randn(model.config.noise_dim)
+        return model.tangent(z, nn.functional.one_hot(y, self.num_classes).float()) / model.tangent_scale
+
+    def critic_loss(self, model, draws):
+        idx = draws.examples(self.size)
+        y, onehot = self.labels[idx], nn.functional.one_hot(self.labels[idx], self.num_classes).float()
+        u_real = self.real[idx] / model.tangent_scale
+        with torch.no_grad():
+            u_fake = self._fake(model, y, draws)
+        tau = draws.rand(1, 1)
+        u_mix = ((1 - tau) * u_real + tau * u_fake).requires_grad_(True)
+        grad = torch.autograd.grad(self.critic(u_mix, onehot).sum(), u_mix, create_graph=True)[0]
+        penalty = ((grad.flatten(1).norm(dim=1) - 1) ** 2).mean()
+        loss = self.critic(u_fake, onehot).mean() - self.critic(u_real, onehot).mean() + self.settings.gp_weight * penalty
+        return loss, {"critic": loss.item()}
+
+    def generator_loss(self, model, draws):
+        s, gen = self.settings, draws.generator
+        y = self.labels[draws.examples(self.size)]
+        partner = torch.stack([self.by_class[int(c)][torch.randint(0, len(self.by_class[int(c)]), (1,), generator=gen)][0]
+                               for c in y])
+        u_fake = self._fake(model, y, draws)
+        loss = (-s.adversarial_weight * self.critic(u_fake, nn.functional.one_hot(y, self.num_classes).float()).mean()
+                + s.reconstruction_weight * (u_fake - self.real[partner] / model.tangent_scale).abs().mean())
+        return loss, {"generator": loss.item()}
+
+    def model_config(self, model):
+        return motion3dgan.config_dict(model)
+
+
+def random_masks(n, num_frames, generator):
+    """Training masks (n, F) bool, True = known: a quarter each of FFB, FFE and FFM layouts (§5.3)
+    and of one missing segment of random position and length (Berson et al.'s random gaps)."""
+    kind = torch.randint(0, 4, (n,), generator=generator)
+    seed = int(torch.randint(0, 2**31 - 1, (1,), generator=generator))
+    masks = [torch.as_tensor(fill_masks(s, n, num_frames, seed + i)) for i, s in enumerate(FILL_SETTINGS)]
+    start = torch.randint(1, num_frames - 2, (n, 1), generator=generator)
+    length = torch.randint(2, num_frames // 2, (n, 1), generator=generator)
+    f = torch.arange(num_frames)[None]
+    masks.append(~((f >= start) & (f < (start + length).clamp(max=num_frames - 1))))
+    return torch.stack(masks)[kind, torch.arange(n)]
+
+
+class LSTMFillerRecipe(_BaselineRecipe):
+    """The bidirectional-LSTM filler (Berson et al.): random masks, the masked L1 of their Eq. 1."""
+
+    distributed = False  # the filler draws its own noise inside the forward pass
+
+    def __init__(self, settings=config.LSTMFillerTraining()):
+        self._prepare(settings, "lstm_filler")
+        self.normalizer = data.LandmarkNormalizer.fit(self.train)
+        self.x_all = torch.as_tensor(self.normalizer.normalize(self.train.landmarks))
+        self.size = len(self.x_all)
+
+    def build(self, generator):
+        model = lstm_filler.LSTMFiller()
+        model.normalizer = self.normalizer
+        return model
+
+    def loss(self, model, draws):
+        x = self.x_all[draws.examples(self.size)]
+        known = draws.rows(lambda n, gen: random_masks(n, x.shape[1], gen))
+        loss = lstm_filler.masked_l1(model(x, known, generator=draws.generator), x, known, self.settings.alpha_gt)
+        return loss, {"loss": loss.item()}
+
+    def metadata(self, model):
+        return {"training": asdict(self.settings), "normalizer": self.normalizer.to_dict(),
+                "torch_version": torch.__version__}
+
+
+# ------------------------------------------------------------------------------------ mesh deformation
+class DeformationRecipe(Recipe):
+    """A Table 5 network: (neutral mesh, Delta L_f) -> Delta M_f, S2D's landmark-weighted L1."""
+
+    kind = "deformer"
+
+    def __init__(self, settings=config.DeformationTraining()):
+        s = self.settings = settings
+        self.name = f"deformer ({deformation.check_method(s.method)}, {deformation.check_split(s.split)} split)"
+        train, _ = deformation.split_datasets(s.split)
+        if s.max_sequences:
+            train = train.subset(np.random.default_rng(s.seed).permutation(len(train))[:s.max_sequences])
+        pairs = deformation.make_pairs(train, s.frames_per_sequence, seed=s.seed)
+        self.neutral, self.dl, self.dm = (torch.as_tensor(a) for a in (pairs.neutral, pairs.delta_landmarks,
+                                                                       pairs.delta_mesh))
+        self.weights = deformation.loss_weights()
+        self.size = len(pairs)
+
+    def build(self, generator):
+        return deformation.build_model(self.settings.method)
+
+    def loss(self, model, draws):
+        seq = draws.examples(self.size)
+        k = self.dm.shape[1]
+        frame = draws.rows(lambda n, gen: torch.stack([torch.randperm(k, generator=gen)[:self.settings.frames_per_batch]
+                                                       for _ in range(n)]))
+        target = self.dm[seq[:, None], frame]
+        predicted = model(self.neutral[seq], self.dl[seq[:, None], frame])
+        loss = deformation_loss(predicted, target, self.weights)
+        return loss, {"loss": loss.item(), "error_mm": (predicted - target).norm(dim=-1).mean().item()}
+
+    def model_config(self, model):
+        return deformation.METHODS[self.settings.method][0].config_dict(model)
+
+    def metadata(self, model):
+        return {"method": self.settings.method, "split": self.settings.split,
+                "held_out_expressions": list(deformation.HELD_OUT_EXPRESSIONS)} | super().metadata(model)
+
+    def checkpoint_name(self):
+        return f"deform_{self.settings.method}_{self.settings.split}"
+
+
+RECIPES = {"denoiser": DenoiserRecipe, "guide": GuideRecipe, "text_head": TextHeadRecipe,
+           "evaluator": EvaluatorRecipe, "actor": ActorRecipe, "motionclip": MotionClipRecipe,
+           "motion3dgan": Motion3DGANRecipe, "lstm_filler": LSTMFillerRecipe, "deformer": DeformationRecipe}
+SETTINGS = {"denoiser": config.DenoiserTraining, "guide": config.GuideTraining, "text_head": config.TextHeadTraining,
+            "evaluator": config.EvaluatorTraining, "actor": config.ActorTraining,
+            "motionclip": config.MotionClipTraining, "motion3dgan": config.Motion3DGANTraining,
+            "lstm_filler": config.LSTMFillerTraining, "deformer": config.DeformationTraining}
