@@ -22,7 +22,6 @@ Checkpoints are ``deform_<method>_<split>``; :func:`deform` uses ``deform_ours_i
 from __future__ import annotations
 
 import json
-import time
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -31,6 +30,7 @@ import torch
 from . import data, metrics
 from .checkpoints import checkpoint_paths, load_checkpoint
 from .face import template as tpl
+from .face.template import check_neutral_mesh
 from .models import coma, deformer, linear_deformer
 
 DATASET = "coma"  # §6: the deformation experiments use CoMA
@@ -156,20 +156,6 @@ def error_summary(errors, pairs):
             "per_label": per_label, "errors": errors}
 
 
-def check_neutral_mesh(vertices):
-    """A neutral mesh of the template topology as float32 (V, 3), or a clear error."""
-    v = np.asarray(vertices)
-    expected = tpl.get_template().num_vertices
-    if v.ndim != 2 or v.shape[1] != 3:
-        raise ValueError(f"a neutral mesh must be (V, 3) vertices, got shape {v.shape}")
-    if v.shape[0] != expected:
-        raise ValueError(f"the neutral mesh has {v.shape[0]} vertices; the template topology has {expected} "
-                         f"(meshes of another topology must first be registered to the template)")
-    if not np.all(np.isfinite(v)):
-        raise ValueError(f"the neutral mesh has {int((~np.isfinite(v)).any(1).sum())} non-finite vertices")
-    return v.astype(np.float32)
-
-
 def check_landmark_sequence(landmarks):
     """A landmark sequence as float32 (F, 68, 3) in mm, or a clear error."""
     x = np.asarray(landmarks)
@@ -194,32 +180,3 @@ def deform(neutral_vertices, landmark_sequence, model=None):
     with torch.no_grad():
         dm = model(torch.as_tensor(neutral)[None], torch.as_tensor(delta)[None])[0].numpy()
     return tpl.place_mouth_band(neutral[None] + dm, tpl.get_template())
-
-
-ANIMATE_STEPS = 100  # reverse steps per pass of Alg. 4 in `animate` (the book's respaced chain, chapter 08)
-
-
-def animate(neutral_vertices, label, order="N2E", steps=ANIMATE_STEPS, seed=0, model=None, denoiser=None,
-            guide=None, progress=False):
-    """End to end (chapter 10): a neutral mesh (V, 3) of the template topology -> its landmarks ->
-    geometry-adaptive generation of ``label`` (Alg. 4, with the book's reconstruction guidance) ->
-    deformation.  Returns (meshes (F, V, 3), landmarks (F, 68, 3), seconds per stage)."""
-    from . import tasks
-    from .face import COMA_LABELS
-    if label not in COMA_LABELS:
-        raise ValueError(f"unknown label {label!r}; allowed (the CoMA-like set the models were trained on): "
-                         f"{', '.join(COMA_LABELS)}")
-    seconds = {}
-    t0 = time.perf_counter()
-    neutral = check_neutral_mesh(neutral_vertices)
-    landmarks0 = neutral[tpl.get_template().landmark_index]
-    seconds["landmarks"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    landmarks = tasks.geometry_adaptive(landmarks0, label, order=order, steps=steps, seed=seed,
-                                        reconstruction_scale=tasks.RECONSTRUCTION_SCALE, denoiser=denoiser,
-                                        guide=guide, progress=progress)[0]
-    seconds["generation"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    meshes = deform(neutral, landmarks, model=model)
-    seconds["deformation"] = time.perf_counter() - t0
-    return meshes, landmarks, seconds

@@ -1,4 +1,4 @@
-"""Mesh files in and out (facelib.io) and the end-to-end command `python -m facelib animate`."""
+"""Mesh files in and out (facelib.meshio) and the end-to-end command `python -m facelib animate`."""
 import json
 
 import numpy as np
@@ -6,7 +6,7 @@ import pytest
 import trimesh
 
 from facelib import __main__ as cli
-from facelib import io
+from facelib import meshio as io
 from facelib.face import Face, sample_identity
 from facelib.face import template as tpl
 
@@ -51,7 +51,7 @@ def test_write_animation_is_all_or_nothing(tmp_path):
     written = io.write_animation(tmp_path / "ok", meshes, extra={"note.txt": b"x"})
     assert sorted(p.name for p in written) == ["frame_000.obj", "frame_001.obj", "frame_002.obj", "note.txt"]
     with pytest.raises(Exception):
-        io.write_animation(tmp_path / "half", meshes, gif_frames=[np.zeros((4, 4))] + ["not an image"])
+        io.write_animation(tmp_path / "half", meshes, gif=b"GIF89a", extra={"note.txt": "not bytes"})
     assert not (tmp_path / "half").exists()
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".half")]  # the temporary folder is gone
 

@@ -95,7 +95,7 @@ def test_shipped_denoisers_load_and_sample_deterministically():
 
 def test_cli_sample_writes_npz(tmp_path):
     out = tmp_path / "out.npz"
-    assert main(["sample", "--task", "unconditional", "--n", "2", "--length", "30", "--steps", "4",
+    assert main(["sample", "unconditional", "--n", "2", "--length", "30", "--steps", "4",
                  "--out", str(out)]) == 0
     z = np.load(out)
     assert z["landmarks"].shape == (2, 30, 68, 3) and z["landmarks"].dtype == np.float32

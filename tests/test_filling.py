@@ -7,7 +7,8 @@ import torch
 from facelib import baselines, data, inpainting, metrics, tasks
 from facelib.__main__ import main
 from facelib.diffusion import GaussianDiffusion, linear_betas
-from facelib.models.lstm_filler import masked_l1, random_masks
+from facelib.models.lstm_filler import masked_l1
+from facelib.training.recipes import random_masks
 
 
 @pytest.fixture(scope="module")
@@ -180,7 +181,7 @@ def test_cli_fill_and_geometry(tmp_path, coma_test, capsys):
     seq = tmp_path / "seq.npz"
     np.savez(seq, landmarks=coma_test.landmarks[0])
     out = tmp_path / "filled.npz"
-    assert main(["sample", "--task", "fill", "--input", str(seq), "--known", "0:10,30:40", "--steps", "5",
+    assert main(["sample", "fill", "--input", str(seq), "--known", "0:10,30:40", "--steps", "5",
                  "--out", str(out)]) == 0
     with np.load(out) as f:
         filled, known = f["landmarks"], f["known"]
@@ -189,15 +190,15 @@ def test_cli_fill_and_geometry(tmp_path, coma_test, capsys):
     neutral = tmp_path / "neutral.npz"
     np.savez(neutral, neutral=coma_test.subject_neutrals()[0])
     out = tmp_path / "geo.npz"
-    assert main(["sample", "--task", "geometry", "--neutral", str(neutral), "--label", "mouth_open", "--n", "2",
+    assert main(["sample", "geometry", "--neutral", str(neutral), "--label", "mouth_open", "--n", "2",
                  "--passes", "1", "--steps", "5", "--out", str(out)]) == 0
     with np.load(out) as f:
         assert f["landmarks"].shape == (2, 40, 68, 3) and list(f["labels"]) == ["mouth_open N2E"] * 2
     with pytest.raises(SystemExit):
-        main(["sample", "--task", "fill", "--input", str(seq), "--known", "0:40", "--out", str(out)])
+        main(["sample", "fill", "--input", str(seq), "--known", "0:40", "--out", str(out)])
     assert "no unknown frame" in capsys.readouterr().err
     with pytest.raises(SystemExit):
-        main(["sample", "--task", "geometry", "--neutral", str(seq), "--label", "mouth_open", "--out", str(out)])
+        main(["sample", "geometry", "--neutral", str(seq), "--label", "mouth_open", "--out", str(out)])
     assert "(68, 3)" in capsys.readouterr().err
 
 

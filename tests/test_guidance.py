@@ -128,7 +128,7 @@ def test_label_control_is_deterministic_and_beats_unguided_sampling():
 def test_cli_label_task_writes_npz(tmp_path):
     from facelib.__main__ import main
     out = tmp_path / "smile.npz"
-    assert main(["sample", "--task", "label", "--label", "high_smile", "--n", "2", "--steps", "5",
+    assert main(["sample", "label", "--label", "high_smile", "--n", "2", "--steps", "5",
                  "--out", str(out)]) == 0
     npz = np.load(out)
     assert npz["landmarks"].shape == (2, 40, 68, 3) and npz["landmarks"].dtype == np.float32
@@ -136,4 +136,4 @@ def test_cli_label_task_writes_npz(tmp_path):
     assert '"guidance_weight": 0.01' in str(npz["config"])
     assert f'"adagrad_lr": {tasks.adagrad_lr("coma", 5)}' in str(npz["config"])
     with pytest.raises(SystemExit):
-        main(["sample", "--task", "label", "--label", "grin", "--n", "2", "--steps", "5", "--out", str(out)])
+        main(["sample", "label", "--label", "grin", "--n", "2", "--steps", "5", "--out", str(out)])

@@ -408,7 +408,7 @@ def test_motionclip_baseline_is_deterministic():
 def test_cli_text_task_writes_npz(tmp_path, capsys):
     from facelib.__main__ import main
     out = tmp_path / "text.npz"
-    assert main(["sample", "--task", "text", "--text", "disgust high smile", "--n", "2", "--steps", "5",
+    assert main(["sample", "text", "--text", "disgust high smile", "--n", "2", "--steps", "5",
                  "--out", str(out)]) == 0
     npz = np.load(out)
     assert npz["landmarks"].shape == (2, 40, 68, 3) and list(npz["texts"]) == ["disgust high smile"] * 2
@@ -417,31 +417,31 @@ def test_cli_text_task_writes_npz(tmp_path, capsys):
     assert config["adagrad_lr"] == pytest.approx(tasks.text_lr(5))
     assert config["guidance_weight"] == tasks.TEXT_GUIDANCE_WEIGHT and config["head_input"] == "x_t"
     assert config["particles"] == 1 and config["max_time"] is None
-    assert main(["sample", "--task", "text", "--text", "from sad to the neutral face", "--n", "1", "--steps", "3",
+    assert main(["sample", "text", "--text", "from sad to the neutral face", "--n", "1", "--steps", "3",
                  "--head-input", "x0_hat", "--out", str(out)]) == 0
     assert json.loads(str(np.load(out)["config"]))["head_input"] == "x0_hat"
-    assert main(["sample", "--task", "text", "--text", "from sad to the neutral face", "--n", "1", "--steps", "3",
+    assert main(["sample", "text", "--text", "from sad to the neutral face", "--n", "1", "--steps", "3",
                  "--score", "contrastive", "--out", str(out)]) == 0
     config = json.loads(str(np.load(out)["config"]))
     assert config["score"] == "contrastive" and config["guidance_weight"] == tasks.CONTRASTIVE_GUIDANCE_WEIGHT
     assert config["adagrad_lr"] == pytest.approx(tasks.text_lr(3, score="contrastive"))
-    assert main(["sample", "--task", "text", "--text", "from sad to the neutral face", "--n", "2", "--steps", "10",
+    assert main(["sample", "text", "--text", "from sad to the neutral face", "--n", "2", "--steps", "10",
                  "--score", "contrastive", "--particles", "3", "--max-time", "1400", "--out", str(out)]) == 0
     config = json.loads(str(np.load(out)["config"]))
     assert config["particles"] == 3 and config["select_time"] == tasks.SELECT_TIME and config["max_time"] == 1400
     assert np.load(out)["landmarks"].shape == (2, 40, 68, 3)
     assert config["vocabulary"] is False
-    assert main(["sample", "--task", "text", "--text", "beaming", "--n", "1", "--steps", "3", "--score", "contrastive",
+    assert main(["sample", "text", "--text", "beaming", "--n", "1", "--steps", "3", "--score", "contrastive",
                  "--vocabulary", "--out", str(out)]) == 0
     assert json.loads(str(np.load(out)["config"]))["vocabulary"] is True
     with pytest.raises(SystemExit):
-        main(["sample", "--task", "text", "--text", "beaming", "--n", "1", "--steps", "3", "--vocabulary",
+        main(["sample", "text", "--text", "beaming", "--n", "1", "--steps", "3", "--vocabulary",
               "--out", str(out)])
     assert "vocabulary is matched by the contrastive score" in capsys.readouterr().err
     with pytest.raises(SystemExit):
-        main(["sample", "--task", "label", "--label", "happy", "--particles", "2", "--out", str(out)])
-    assert "belong to --task text" in capsys.readouterr().err
-    assert main(["sample", "--task", "text", "--text", "from sad to the neutral face", "--n", "2", "--steps", "20",
+        main(["sample", "label", "--label", "happy", "--particles", "2", "--out", str(out)])
+    assert "unrecognized arguments: --particles" in capsys.readouterr().err  # an option of text only
+    assert main(["sample", "text", "--text", "from sad to the neutral face", "--n", "2", "--steps", "20",
                  "--decoder-start", "400", "--out", str(out)]) == 0
     config = json.loads(str(np.load(out)["config"]))
     assert config["method"] == "decoder_then_diffusion" and config["decoder_start"] == 400
@@ -449,8 +449,8 @@ def test_cli_text_task_writes_npz(tmp_path, capsys):
     for extra in (["--lr", "0.1"], ["--head-input", "x0_hat"], ["--score", "contrastive"], ["--particles", "2"],
                   ["--vocabulary"]):  # options of Alg. 2 that the decoder route would ignore
         with pytest.raises(SystemExit):
-            main(["sample", "--task", "text", "--text", "sad", "--n", "1", "--steps", "5", "--decoder-start", "400",
+            main(["sample", "text", "--text", "sad", "--n", "1", "--steps", "5", "--decoder-start", "400",
                   *extra, "--out", str(out)])
         assert "replaces Alg. 2's guidance" in capsys.readouterr().err
     with pytest.raises(SystemExit):
-        main(["sample", "--task", "text", "--n", "2", "--out", str(out)])
+        main(["sample", "text", "--n", "2", "--out", str(out)])

@@ -388,3 +388,17 @@ def get_template():
     for arr in (canonical, vertices, colors, tpl.landmark_index, band):
         arr.setflags(write=False)
     return tpl
+
+
+def check_neutral_mesh(vertices):
+    """A neutral mesh of the template topology as float32 (V, 3), or a clear error."""
+    v = np.asarray(vertices)
+    expected = get_template().num_vertices
+    if v.ndim != 2 or v.shape[1] != 3:
+        raise ValueError(f"a neutral mesh must be (V, 3) vertices, got shape {v.shape}")
+    if v.shape[0] != expected:
+        raise ValueError(f"the neutral mesh has {v.shape[0]} vertices; the template topology has {expected} "
+                         f"(meshes of another topology must first be registered to the template)")
+    if not np.all(np.isfinite(v)):
+        raise ValueError(f"the neutral mesh has {int((~np.isfinite(v)).any(1).sum())} non-finite vertices")
+    return v.astype(np.float32)

@@ -1,4 +1,4 @@
-"""Mesh files in and out (chapter 10; ``python -m facelib animate``): OBJ read with a topology
+"""Mesh files in and out (chapter 10; ``python -m facelib animate``); named so that it shadows no standard module, and importing nothing above the face world: OBJ read with a topology
 check, an animated sequence written as one OBJ per frame plus a GIF, all or nothing."""
 from __future__ import annotations
 
@@ -32,9 +32,8 @@ def read_neutral_mesh(path):
     if not np.array_equal(f, t.faces):
         raise ValueError(f"{path} has the template's vertex and triangle counts but other triangles: "
                          f"its vertices are not in the template's order")
-    from .deformation import check_neutral_mesh
     try:
-        return check_neutral_mesh(v)
+        return tpl.check_neutral_mesh(v)
     except ValueError as e:
         raise ValueError(f"{path}: {e}") from None
 
@@ -46,12 +45,11 @@ def write_obj(path, vertices, faces=None):
     trimesh.Trimesh(np.asarray(vertices, dtype=np.float64), faces, process=False).export(path)
 
 
-def write_animation(out_dir, meshes, gif_frames=None, fps=12, extra=None):
-    """Write ``frame_000.obj`` ... (one per mesh of (F, V, 3)), ``animation.gif`` (if frames are
-    given) and ``extra`` {file name: bytes} into ``out_dir``.  Everything is first written to a
+def write_animation(out_dir, meshes, gif=None, extra=None):
+    """Write ``frame_000.obj`` ... (one per mesh of (F, V, 3)), ``animation.gif`` (``gif``: its bytes,
+    e.g. from viz.gif_bytes) and ``extra`` {file name: bytes} into ``out_dir``.  Everything is first written to a
     temporary folder beside it and moved in only when complete, so an error leaves nothing half-way.
     Returns the list of written paths."""
-    from .viz import gif_bytes
     out_dir = Path(out_dir)
     out_dir.parent.mkdir(parents=True, exist_ok=True)
     meshes = np.asarray(meshes)
@@ -60,8 +58,8 @@ def write_animation(out_dir, meshes, gif_frames=None, fps=12, extra=None):
         tmp = Path(tmp)
         for f, m in enumerate(meshes):
             write_obj(tmp / f"frame_{f:0{digits}d}.obj", m)
-        if gif_frames is not None:
-            (tmp / "animation.gif").write_bytes(gif_bytes(gif_frames, fps))
+        if gif is not None:
+            (tmp / "animation.gif").write_bytes(gif)
         for name, content in (extra or {}).items():
             (tmp / name).write_bytes(content)
         out_dir.mkdir(exist_ok=True)

@@ -1,0 +1,29 @@
+"""facelib: the code of *Diffusion for 4D Faces*, a reconstruction of the 4D Facial Expression Diffusion
+Model (Zou et al. 2023) on a synthetic face world.
+
+The map of the package, bottom to top.  A module imports only from the layers below it
+(tests/test_layout.py checks every import):
+
+0. ``config``       every default: datasets, training recipes, sampling tasks (paper value or our choice)
+1. ``face``         the synthetic face world: template, identities, action units, expressions, sequences;
+   ``metrics``      accuracy, FID, diversity, seams, bootstrap intervals;  ``srvf``  square-root velocity
+   ``chapters``     run one chapter notebook (``make chapter N=05``)
+2. ``data``         dataset generation and cache, FaceDataset, splits, the landmark normaliser;
+   ``descriptions`` the words for every expression;  ``diffusion``  schedules and GaussianDiffusion (Eq. 1-8);
+   ``viz``          plots, renders, GIFs;  ``meshio``  OBJ in and out, all or nothing
+3. ``text``         the offline sentence encoder;  ``models``  networks and their configs only;
+   ``checkpoints``  weights + JSON config, sha256-checked
+4. ``guidance``     sampler hooks: Adagrad optimisation (Alg. 1-2), mean shift, reconstruction guidance;
+   ``inpainting``   known frames (Alg. 3);  ``rig_fit``  the rig fitted to landmarks;  ``toy``  a 2-D DDPM;
+   ``results``      stored full-scale results with their provenance
+5. ``baselines``    the related papers' models;  ``deformation``  §3.3 mesh deformation;
+   ``evaluation``   the independent classifier and its scores
+6. ``tasks``        unconditional, label (Alg. 1), text (Alg. 2), fill (Alg. 3), geometry (Alg. 4)
+7. ``pipeline``     neutral mesh -> animated meshes;  ``training``  one loop, one recipe per model
+8. ``__main__``     the command line: ``python -m facelib data|train|sample TASK|neutral|animate|chapter|results``
+
+The public API is the modules themselves: ``from facelib import tasks; tasks.label_control("high_smile")``.
+"""
+__all__ = ["baselines", "chapters", "checkpoints", "config", "data", "deformation", "descriptions", "diffusion",
+           "evaluation", "face", "guidance", "inpainting", "meshio", "metrics", "models", "pipeline", "results",
+           "rig_fit", "srvf", "tasks", "text", "toy", "training", "viz"]

@@ -1,0 +1,65 @@
+"""The package's layout: every import points down the map of facelib/__init__.py, and none hides in a function."""
+import ast
+from pathlib import Path
+
+import facelib
+
+ROOT = Path(facelib.__file__).parent
+LAYERS = {"config": 0, "face": 1, "metrics": 1, "srvf": 1, "chapters": 1, "data": 2, "descriptions": 2,
+          "diffusion": 2, "viz": 2, "meshio": 2, "text": 3, "models": 3, "checkpoints": 3, "guidance": 4,
+          "inpainting": 4, "rig_fit": 4, "toy": 4, "results": 4, "baselines": 5, "deformation": 5, "evaluation": 5,
+          "tasks": 6, "pipeline": 7, "training": 7, "__main__": 8}
+
+
+def _unit(module):
+    """facelib.tasks -> "tasks", facelib.face.aus -> "face", facelib -> None."""
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 else None
+
+
+def _imports():
+    """(source file, source unit, imported facelib module, line, inside a function) for every import."""
+    for path in sorted(ROOT.rglob("*.py")):
+        rel = path.relative_to(ROOT.parent).with_suffix("")
+        module = ".".join(rel.parts[:-1] if rel.name == "__init__" else rel.parts)
+        package = module if path.name == "__init__.py" else module.rsplit(".", 1)[0]
+        tree = ast.parse(path.read_text())
+        inside = {id(n) for f in ast.walk(tree) if isinstance(f, (ast.FunctionDef, ast.AsyncFunctionDef))
+                  for n in ast.walk(f)}
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom) and node.level:
+                base = package.split(".")[:len(package.split(".")) - node.level + 1]
+                targets = [".".join(base + [node.module])] if node.module else [".".join(base + [a.name]) for a in node.names]
+            elif isinstance(node, ast.ImportFrom) and (node.module or "").startswith("facelib"):
+                targets = [node.module]
+            elif isinstance(node, ast.Import):
+                targets = [a.name for a in node.names if a.name.startswith("facelib")]
+            else:
+                continue
+            for target in targets:
+                yield path.relative_to(ROOT.parent), _unit(module), target, node.lineno, id(node) in inside
+
+
+def test_every_unit_of_the_package_has_a_layer():
+    units = {p.stem if p.is_file() else p.name for p in ROOT.iterdir()
+             if (p.suffix == ".py" and p.stem != "__init__") or (p / "__init__.py").exists()}
+    assert units == set(LAYERS), f"give these a layer in facelib/__init__.py's map: {units ^ set(LAYERS)}"
+
+
+def test_imports_point_down_the_map():
+    upward = [f"{path}:{line} imports {target} (layer {LAYERS[_unit(target)]}) from layer {LAYERS[unit]}"
+              for path, unit, target, line, _ in _imports()
+              if unit is not None and _unit(target) not in (None, unit) and LAYERS[_unit(target)] >= LAYERS[unit]]
+    assert not upward, "imports that point up or sideways:\n" + "\n".join(upward)
+
+
+def test_no_facelib_import_hides_inside_a_function():
+    hidden = [f"{path}:{line} imports {target} inside a function" for path, _, target, line, inside in _imports()
+              if inside]
+    assert not hidden, "\n".join(hidden)
+
+
+def test_no_module_shadows_the_standard_library():
+    import sys
+    shadowing = [p.stem for p in ROOT.glob("*.py") if p.stem in sys.stdlib_module_names]
+    assert not shadowing, f"facelib modules named like standard modules: {shadowing}"
