@@ -24,6 +24,11 @@ The map of the package, bottom to top.  A module imports only from the layers be
 
 The public API is the modules themselves: ``from facelib import tasks; tasks.label_control("high_smile")``.
 """
+# The layer of every module and subpackage (the map above); tests/test_layout.py checks each import against it.
+LAYERS = {"config": 0, "face": 1, "metrics": 1, "srvf": 1, "chapters": 1, "data": 2, "descriptions": 2,
+          "diffusion": 2, "viz": 2, "meshio": 2, "text": 3, "models": 3, "checkpoints": 3, "guidance": 4,
+          "inpainting": 4, "rig_fit": 4, "toy": 4, "results": 4, "baselines": 5, "deformation": 5, "evaluation": 5,
+          "tasks": 6, "pipeline": 7, "training": 7, "__main__": 8}
 __all__ = ["baselines", "chapters", "checkpoints", "config", "data", "deformation", "descriptions", "diffusion",
            "evaluation", "face", "guidance", "inpainting", "meshio", "metrics", "models", "pipeline", "results",
            "rig_fit", "srvf", "tasks", "text", "toy", "training", "viz"]

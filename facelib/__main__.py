@@ -45,27 +45,10 @@ TASKS = ("unconditional", "label", "text", "fill", "geometry")
 
 
 def _train(args):
-
-    settings = {"seed": args.seed}
-    if args.name in ("denoiser", "guide", "text_head", "evaluator", "actor", "motionclip", "motion3dgan", "lstm_filler"):
-        settings["dataset"] = args.dataset or ("coma+bu" if args.name in ("text_head", "motionclip") else "coma")
-    if args.name in ("guide", "evaluator"):
-        settings["classifier_type"] = args.type
-    if args.name == "deformer":
-        settings.update(method=args.method, split=args.split)
-    if args.variable_length:
-        if args.name != "denoiser":
-            raise ValueError("--variable-length trains a denoiser (paper App. A): use it with `train denoiser`")
-        settings["num_frames"] = (35, 45)
-    if args.batch_size:
-        settings["batch_size"] = args.batch_size
-    recipe = training.recipe(args.name, **settings)
-    if args.fast:
-        recipe.settings = recipe.settings.fast()
-    elif args.steps:
-        if recipe.settings.epochs is not None:
-            raise ValueError(f"{args.name} trains for a number of epochs ({recipe.settings.epochs}): --steps does not apply")
-        recipe.settings = recipe.settings.with_steps(args.steps)
+    given = {"dataset": args.dataset, "classifier_type": args.type, "method": args.method, "split": args.split,
+             "steps": args.steps, "batch_size": args.batch_size, "seed": args.seed,
+             "num_frames": (35, 45) if args.variable_length else None}
+    recipe = training.recipe(args.name, fast=args.fast, **{k: v for k, v in given.items() if v is not None})
     t0 = time.perf_counter()
     written = training.train_and_save(recipe, name=args.out, device=args.device, resume=args.resume)
     if written:
@@ -217,10 +200,9 @@ def _results(args):
 
 
 def _default(task, field):
-    value = getattr(config.SAMPLING[task], field)
-    paper = getattr(config.SAMPLING[task].paper(), field)
-    show = lambda v: "all T = 2000" if v is None else v  # noqa: E731
-    return f"default {show(value)}; --paper: {show(paper)}"
+    """'default X; --paper: Y' for the help of a sampling option (config.SAMPLING)."""
+    value, paper = (getattr(c, field) for c in (config.SAMPLING[task], config.SAMPLING[task].paper()))
+    return f"default {'all T = 2000' if value is None else value}; --paper: {'all T = 2000' if paper is None else paper}"
 
 
 def _add_sample_parsers(sub):
@@ -311,19 +293,19 @@ def main(argv=None):
                    "motion3dgan, actor: the baselines of Table 1; motionclip: the baseline of Table 2; lstm_filler: "
                    "the baseline of Table 3; deformer: the mesh deformation of §3.3 and the baselines of Table 5")
     p.add_argument("--dataset", default=None, choices=list(data.DATASET_NAMES),
-                   help="default: coma (coma+bu for text_head and motionclip, as §5.2)")
-    p.add_argument("--type", default="I", choices=list(data.CLASSIFIER_TYPES), help="guide, evaluator: I = label, "
+                   help="default: the recipe's (coma; coma+bu for text_head and motionclip, as §5.2)")
+    p.add_argument("--type", default=None, choices=list(data.CLASSIFIER_TYPES), help="guide, evaluator: I = label, "
                    "S = label x N2E/E2N (default I)")
     p.add_argument("--variable-length", action="store_true", help="denoiser: train on lengths 35-45 (paper App. A)")
-    p.add_argument("--method", default="ours", choices=["ours", "no_attention", "s2d", "coma", "linear"],
+    p.add_argument("--method", default=None, choices=["ours", "no_attention", "s2d", "coma", "linear"],
                    help="deformer: a row of Table 5 (default ours)")
-    p.add_argument("--split", default="identity", choices=["identity", "expression"], help="deformer: 3 subjects "
+    p.add_argument("--split", default=None, choices=["identity", "expression"], help="deformer: 3 subjects "
                    "or 3 expressions held out, as §6 (default identity)")
     p.add_argument("--steps", type=int, default=None, help="training steps (default: the recipe's, facelib/config.py)")
     p.add_argument("--batch-size", type=int, default=None, help="global batch, split over the processes "
                    "(default: the recipe's)")
     p.add_argument("--fast", action="store_true", help="the recipe's fast-mode settings (a few steps, for tests)")
-    p.add_argument("--seed", type=int, default=0, help="default 0")
+    p.add_argument("--seed", type=int, default=None, help="default: the recipe's (0)")
     p.add_argument("--device", default=None, choices=["cpu", "cuda"], help="default: a GPU when torch sees one")
     p.add_argument("--resume", action="store_true", help="continue from <out>.state.pt if a run left one "
                    "(the state is written every 500 steps)")

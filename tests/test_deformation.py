@@ -94,8 +94,7 @@ def test_splits_hold_out_subjects_or_expressions():
 
 
 def test_short_training_learns_and_is_deterministic(test_pairs):
-    recipe = training.recipe("deformer", method="ours")
-    recipe.settings = recipe.settings.fast()
+    recipe = training.recipe("deformer", fast=True, method="ours")
     model, history = training.fit(recipe, progress=False, log_every=5)
     _, again = training.fit(recipe, progress=False, log_every=5)
     assert history["loss"] == again["loss"]

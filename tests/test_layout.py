@@ -1,14 +1,11 @@
-"""The package's layout: every import points down the map of facelib/__init__.py, and none hides in a function."""
+"""The package's layout: every import points down the map of facelib/__init__.py (facelib.LAYERS), and none hides in a function."""
 import ast
 from pathlib import Path
 
 import facelib
 
 ROOT = Path(facelib.__file__).parent
-LAYERS = {"config": 0, "face": 1, "metrics": 1, "srvf": 1, "chapters": 1, "data": 2, "descriptions": 2,
-          "diffusion": 2, "viz": 2, "meshio": 2, "text": 3, "models": 3, "checkpoints": 3, "guidance": 4,
-          "inpainting": 4, "rig_fit": 4, "toy": 4, "results": 4, "baselines": 5, "deformation": 5, "evaluation": 5,
-          "tasks": 6, "pipeline": 7, "training": 7, "__main__": 8}
+LAYERS = facelib.LAYERS
 
 
 def _unit(module):

@@ -68,6 +68,10 @@ def test_settings_refuse_impossible_values_with_the_allowed_ones():
         config.GuideTraining(steps=100, warmup=100)
     with pytest.raises(ValueError, match="unknown model 'vae'; allowed: denoiser"):
         training.recipe("vae")
+    with pytest.raises(ValueError, match="denoiser has no setting method; its settings: steps"):
+        training.recipe("denoiser", method="ours")
+    with pytest.raises(ValueError, match="evaluator trains for a number of epochs"):
+        training.recipe("evaluator", steps=10)
 
 
 def test_asking_for_an_absent_gpu_is_a_clear_error():

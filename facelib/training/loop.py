@@ -64,9 +64,9 @@ class Draws:
     ``draws.randn(F, 68, 3)`` is (local batch, F, 68, 3); ``draws.generator`` is the shared stream itself,
     for draws that are not per example (all processes make them alike)."""
 
-    def __init__(self, generator, batch_size, rank=0, world=1, device="cpu"):
+    def __init__(self, generator, batch_size, rank=0, world=1, device="cpu", indices=None):
         self.generator, self.batch_size, self.rank, self.world, self.device = generator, batch_size, rank, world, device
-        self.indices = None
+        self.indices = None if indices is None else self.shard(indices)
 
     def shard(self, x):
         """The rows of the global batch ``x`` that this process trains on."""
@@ -157,6 +157,11 @@ def start_distributed(device=None, timeout_s=120):
     return Distributed(rank, world, dev)
 
 
+def is_main_process():
+    """True in a single process and on rank 0 of a distributed run (the one that writes files)."""
+    return not torch.distributed.is_initialized() or torch.distributed.get_rank() == 0
+
+
 def learning_rate(settings: Optimisation, step, total_steps):
     """Linear warm-up over ``warmup`` steps, then a cosine from lr to lr * final_lr_fraction."""
     if step < settings.warmup:
@@ -229,8 +234,7 @@ def fit(recipe, progress=True, log_every=50, device=None, resume_from=None, save
         for objective, loss_of, opt in zip(objectives, losses, optimisers):
             for _ in range(objective.repeats):
                 draws = Draws(generator, settings.batch_size if indices is None else len(indices), dist.rank,
-                              dist.world, dist.device)
-                draws.indices = None if indices is None else draws.shard(indices)
+                              dist.world, dist.device, indices)
                 loss, metrics = loss_of(draws)
                 opt.zero_grad(set_to_none=True)
                 loss.backward()

@@ -72,9 +72,9 @@ class DenoiserRecipe(Recipe):
 
     def __init__(self, settings=config.DenoiserTraining(), model_config=None):
         self.settings = settings
-        self.model_config_ = model_config or DenoiserConfig(num_diffusion_steps=settings.num_diffusion_steps,
+        self.architecture = model_config or DenoiserConfig(num_diffusion_steps=settings.num_diffusion_steps,
                                                              schedule=settings.schedule)
-        if (self.model_config_.num_diffusion_steps, self.model_config_.schedule) != (settings.num_diffusion_steps,
+        if (self.architecture.num_diffusion_steps, self.architecture.schedule) != (settings.num_diffusion_steps,
                                                                                      settings.schedule):
             raise ValueError("the denoiser's schedule must match the training schedule")
         self.name = f"denoiser ({settings.dataset})"
@@ -92,7 +92,7 @@ class DenoiserRecipe(Recipe):
         self.diffusion = GaussianDiffusion(named_betas(settings.schedule, settings.num_diffusion_steps))
 
     def build(self, generator):
-        model = Denoiser(self.model_config_)
+        model = Denoiser(self.architecture)
         # the Gaussian prior of the skip connection sees augmented frames too
         swapped = swap_anatomy(self.x_all, self.own, self.pool, self.settings.anatomy_swap, Draws(generator, self.size))
         model.fit_prior(torch.cat([seqs[i, :n] for seqs in (self.x_all, swapped) for i, n in enumerate(self.lengths)]))
@@ -156,10 +156,10 @@ class GuideRecipe(_NoisyRecipe):
         self.name = f"guide ({settings.dataset}, type {settings.classifier_type})"
         self.class_names = list(self.train.class_names(settings.classifier_type))
         self.targets = torch.as_tensor(self.train.targets(settings.classifier_type))
-        self.model_config_ = model_config or NoisyClassifierConfig(num_classes=len(self.class_names))
+        self.architecture = model_config or NoisyClassifierConfig(num_classes=len(self.class_names))
 
     def build(self, generator):
-        return NoisyClassifier(self.model_config_)
+        return NoisyClassifier(self.architecture)
 
     def loss(self, model, draws):
         logits, idx = self.noisy_batch(model, draws)
@@ -209,10 +209,10 @@ class TextHeadRecipe(_NoisyRecipe):
         self.name = f"text head ({settings.dataset})"
         self.table = description_embeddings(self.train, encoder or get_encoder())
         self.labels, self.kinds = torch.as_tensor(self.train.labels).long(), torch.as_tensor(self.train.kinds).long()
-        self.model_config_ = model_config or TextHeadConfig()
+        self.architecture = model_config or TextHeadConfig()
 
     def build(self, generator):
-        return NoisyTextHead(self.model_config_)
+        return NoisyTextHead(self.architecture)
 
     def loss(self, model, draws):
         output, idx = self.noisy_batch(model, draws)
