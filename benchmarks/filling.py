@@ -27,7 +27,9 @@ import time
 import numpy as np
 import torch
 
-from facelib import baselines, data, evaluation, inpainting, metrics, results, tasks
+from facelib import baselines, config, data, evaluation, inpainting, metrics, results, tasks
+
+ALG3 = config.Fill().paper()  # Alg. 3 as printed; its rows add RePaint or reconstruction guidance explicitly
 
 COLUMNS = ["setting", "method", "steps", "Acc (%)", "Acc 95 % interval", "FID", "FID 95 % interval",
            "L2 on missing frames (mm)", "seam step, median (mm/frame)", "seconds"]
@@ -49,7 +51,7 @@ def main():
     parser.add_argument("--n", type=int, default=None, help="test sequences per row (default: all)")
     parser.add_argument("--steps", type=int, nargs="+", default=[200])
     parser.add_argument("--resample", type=int, default=4)
-    parser.add_argument("--reconstruction-scale", type=float, default=tasks.RECONSTRUCTION_SCALE)
+    parser.add_argument("--reconstruction-scale", type=float, default=config.RECONSTRUCTION_SCALE)
     parser.add_argument("--save", metavar="NAME", help="store the table in results/NAME.json")
     args = parser.parse_args()
     t_start = time.perf_counter()
@@ -85,7 +87,7 @@ def main():
     for setting in args.settings:
         known = inpainting.fill_masks(setting, n, truth.shape[1], seed=0)
         given = np.where(known[..., None, None], truth, np.nan)
-        fill = lambda steps, **kw: tasks.fill(given, known, steps=steps, denoiser=denoiser, progress=False, **kw)  # noqa: E731
+        fill = lambda steps, **kw: tasks.fill(given, known, ALG3, steps=steps, denoiser=denoiser, progress=False, **kw)  # noqa: E731
         row(setting, "mean imputation", 0, lambda: inpainting.mean_imputation(given, known), known)
         row(setting, "linear interpolation", 0, lambda: inpainting.linear_interpolation(given, known), known)
         row(setting, "BiLSTM filler (Berson et al.)", 0, lambda: baselines.lstm_fill(given, known, filler), known)
@@ -97,8 +99,9 @@ def main():
     if args.save:
         path = results.save_result(
             args.save, title="Table 3, expression filling on the coma test split (IC type I)", columns=COLUMNS,
-            rows=rows, checkpoints=["denoiser_coma", "lstm_filler_coma", "ic_coma_I"], seeds=[0], n=n,
-            steps=sorted(set(args.steps)), wall_time_s=time.perf_counter() - t_start,
+            rows=rows,
+            run=results.Run(checkpoints=["denoiser_coma", "lstm_filler_coma", "ic_coma_I"], seeds=[0], n=n,
+                            steps=sorted(set(args.steps)), wall_time_s=time.perf_counter() - t_start),
             notes=f"masks: inpainting.fill_masks(setting, n, 40, seed=0); sampler seed 0; RePaint r = {args.resample} "
                   f"and reconstruction guidance (zeta = {args.reconstruction_scale:g}) at {low} steps; intervals: "
                   "95 % bootstrap over the sequences (Evaluator.score(intervals=True)); seconds: wall time of the row")

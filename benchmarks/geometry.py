@@ -26,7 +26,7 @@ import time
 import numpy as np
 import torch
 
-from facelib import data, evaluation, metrics, results, tasks
+from facelib import config, data, evaluation, metrics, results, tasks
 
 COLUMNS = ["method", "pass", "Acc (%)", "Acc 95 % interval", "FID", "FID 95 % interval", "diversity",
            "diversity 95 % interval", "step from the given frame, median (mm/frame)", "seconds"]
@@ -47,8 +47,8 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--per-class", type=int, default=None, help="test sequences per type-S class (default: all)")
     parser.add_argument("--steps", type=int, default=100)
-    parser.add_argument("--passes", type=int, default=tasks.HARMONISING_PASSES)
-    parser.add_argument("--reconstruction-scale", type=float, default=tasks.RECONSTRUCTION_SCALE)
+    parser.add_argument("--passes", type=int, default=config.HARMONISING_PASSES)
+    parser.add_argument("--reconstruction-scale", type=float, default=config.RECONSTRUCTION_SCALE)
     parser.add_argument("--save", metavar="NAME", help="store the table in results/NAME.json")
     args = parser.parse_args()
     t_start = time.perf_counter()
@@ -76,17 +76,18 @@ def main():
     row("ground truth (test sequences)", 0, truth, 0.0)
     for name, scale in (("Alg. 4", 0.0), ("Alg. 4 + reconstruction guidance", args.reconstruction_scale)):
         t0 = time.perf_counter()
-        out = tasks.geometry_adaptive(neutral, labels, n=len(rows_sel), steps=args.steps, passes=args.passes,
-                                      reconstruction_scale=scale, denoiser=denoiser, guide=guide, seed=0,
-                                      return_passes=True, progress=False)
+        out = tasks.geometry_passes(neutral, labels, n=len(rows_sel), steps=args.steps, passes=args.passes,
+                                    reconstruction_scale=scale, denoiser=denoiser, guide=guide, seed=0,
+                                    progress=False)
         seconds = time.perf_counter() - t0
         for p in range(len(out)):
             row(name, p + 1, out[p], seconds / len(out))
     if args.save:
         path = results.save_result(
             args.save, title="Table 4, geometry-adaptive generation on the coma test split (IC type S), pass by pass",
-            columns=COLUMNS, rows=table, checkpoints=["denoiser_coma", "guide_coma_S", "ic_coma_S"], seeds=[0],
-            n=len(rows_sel), steps=[args.steps], wall_time_s=time.perf_counter() - t_start,
+            columns=COLUMNS, rows=table,
+            run=results.Run(checkpoints=["denoiser_coma", "guide_coma_S", "ic_coma_S"], seeds=[0], n=len(rows_sel),
+                            steps=[args.steps], wall_time_s=time.perf_counter() - t_start),
             notes=f"{args.per_class or 'all'} test sequences per type-S class, each from its own neutral frame; "
                   f"{args.passes} passes of Alg. 4 (re-noised to T), the last is what Alg. 4 returns; reconstruction "
                   f"guidance zeta = {args.reconstruction_scale:g}; sampler seed 0; intervals: 95 % bootstrap over the "

@@ -20,7 +20,7 @@ import time
 import numpy as np
 import torch
 
-from facelib import baselines, data, evaluation, results, tasks
+from facelib import baselines, config, data, evaluation, results, tasks
 
 SWEEP_LR = {"coma": [0.001, 0.003, 0.01, 0.03, 0.05, 0.1], "bu": [0.01, 0.03, 0.05, 0.1]}  # at 200 steps
 SWEEP_WEIGHTS = [0.0, 0.01, 1.0]
@@ -59,7 +59,7 @@ def sweep_experiment(args, name, ev, guide, denoiser):
     per_label = args.n // len(ev.class_names)
     labels = [y for y in ev.class_names for _ in range(per_label)]
     targets = np.array([ev.class_index(y) for y in labels])
-    settings = [("Adagrad lr at 200 steps", lr, dict(lr=tasks.step_scaled_lr(lr, tasks.LR_REFERENCE_STEPS, steps)))
+    settings = [("Adagrad lr at 200 steps", lr, dict(lr=tasks.step_scaled_lr(lr, config.LR_REFERENCE_STEPS, steps)))
                 for lr in SWEEP_LR.get(name, [])]
     if name == "coma":
         settings += [("lambda", w, dict(guidance_weight=w)) for w in SWEEP_WEIGHTS]
@@ -125,8 +125,8 @@ def main():
         parser.error(f"--n must be at least 2 (intervals are bootstrapped over the sequences), got {args.n}")
     experiment = {"steps": steps_experiment, "sweep": sweep_experiment, "table1": table1_experiment}[args.experiment]
     print(f"cores: {os.cpu_count()}, torch threads: {torch.get_num_threads()}, experiment: {args.experiment}, "
-          f"n = {args.n}, steps {args.steps}; Adagrad lr {tasks.ADAGRAD_LR} at {tasks.LR_REFERENCE_STEPS} steps, "
-          f"x sqrt({tasks.LR_REFERENCE_STEPS} / steps), lambda {tasks.GUIDANCE_WEIGHT}")
+          f"n = {args.n}, steps {args.steps}; Adagrad lr {config.ADAGRAD_LR} at {config.LR_REFERENCE_STEPS} steps, "
+          f"x sqrt({config.LR_REFERENCE_STEPS} / steps), lambda {config.GUIDANCE_WEIGHT}")
     t0, rows, checkpoints = time.perf_counter(), [], []
     for name in args.dataset:
         ev = evaluation.load_evaluator(name, "I")
@@ -140,13 +140,14 @@ def main():
         titles = {"steps": "Label control (Alg. 1) at several numbers of reverse steps",
                   "sweep": f"Label control: the settings of Alg. 1 and mean shift, {args.steps[0]} steps",
                   "table1": f"Table 1 (label control), {args.steps[0]} reverse steps for the DDPM rows"}
-        path = results.save_result(args.save, title=titles[args.experiment], columns=columns, rows=rows,
-                                   checkpoints=checkpoints, seeds=[0, 11], steps=args.steps,
-                                   n=args.n or max(len(data.load_dataset(d, "test")) for d in args.dataset),
-                                   wall_time_s=time.perf_counter() - t0,
-                                   notes="intervals: 95 % bootstrap over the sequences (Evaluator.score); "
-                                         "table1: the rows of each dataset use n = its whole test split "
-                                         "(column n)")
+        path = results.save_result(
+            args.save, title=titles[args.experiment], columns=columns, rows=rows,
+            run=results.Run(checkpoints=checkpoints, seeds=[0, 11],
+                            n=args.n or max(len(data.load_dataset(d, "test")) for d in args.dataset),
+                            steps=args.steps, wall_time_s=time.perf_counter() - t0),
+            notes="intervals: 95 % bootstrap over the sequences (Evaluator.score); "
+                  "table1: the rows of each dataset use n = its whole test split "
+                  "(column n)")
         print(f"saved {path}")
 
 

@@ -126,10 +126,11 @@ def main():
     columns, rows, title, checkpoints = (lengths if args.lengths else respacing)(args, denoiser, train)
     wall = time.perf_counter() - t0
     if args.save:
-        path = results.save_result(args.save, title=title, columns=columns, rows=rows, checkpoints=checkpoints,
-                                   seeds=[args.seed], n=args.n, steps=args.steps, wall_time_s=wall,
-                                   notes="mean RMSE (mm) to the closest training sequence over n sequences; "
-                                         "intervals: 95 % bootstrap over the sequences")
+        path = results.save_result(
+            args.save, title=title, columns=columns, rows=rows,
+            run=results.Run(checkpoints=checkpoints, seeds=[args.seed], n=args.n, steps=args.steps, wall_time_s=wall),
+            notes="mean RMSE (mm) to the closest training sequence over n sequences; "
+                  "intervals: 95 % bootstrap over the sequences")
         print(f"saved {path}")
     if not args.lengths:
         training_step(denoiser, train)

@@ -19,10 +19,10 @@ facelib/descriptions.py (held_out, blind_held_out: the n sequences cycle through
 through each class's phrasings or sentences), and --vocabulary adds rows of the contrastive score
 matching against the vocabulary (chapter 06 section 12).  The lambda is text_control's
 default for each score; --setting LAMBDA RATE (repeatable) runs the guided rows at these lambdas and
-Adagrad rates instead (a rate at tasks.TEXT_LR_REFERENCE_STEPS = 100 steps, scaled to each number of
+Adagrad rates instead (a rate at config.TEXT_LR_REFERENCE_STEPS = 100 steps, scaled to each number of
 steps as tasks.text_lr scales its default): chapter 06 sections 4 and 10 sweep them.  Also
 timed: the MotionCLIP-style baseline (one decoder pass) and decoder + DDPM (not in the paper,
-chapter 06 section 9: the baseline's sequence re-noised to tasks.DECODER_START and denoised);
+chapter 06 section 9: the baseline's sequence re-noised to config.DECODER_START and denoised);
 --no-baselines leaves them out.  Every Acc and FID comes with its 95 % bootstrap interval over the n
 sequences (Evaluator.score(intervals=True)); --save NAME also writes the table to results/NAME.json
 (facelib.results.save_result: the command, commit, checkpoints' sha256, seeds, n, wall time).
@@ -47,9 +47,9 @@ import time
 import numpy as np
 import torch
 
-from facelib import baselines, data, descriptions, evaluation, results, tasks, text
+from facelib import baselines, config, data, descriptions, evaluation, results, tasks, text
 
-DATASET = tasks.TEXT_DATASET
+DATASET = config.TEXT_DATASET
 COLUMNS = ["method", "steps", "lambda", "lr", "seconds", "Acc %", "Acc 95 % interval", "FID", "FID 95 % interval",
            "MM"]
 
@@ -60,10 +60,10 @@ def main():
     parser.add_argument("--steps", type=int, nargs="+", default=[2000, 200, 100])
     parser.add_argument("--lr", type=float, default=None, help="Adagrad rate for every row (default: tasks.text_lr)")
     parser.add_argument("--enriched", action="store_true", help="the enriched-text task (type-S IC)")
-    parser.add_argument("--head-input", nargs="+", default=["x_t"], choices=list(tasks.HEAD_INPUTS))
-    parser.add_argument("--score", nargs="+", default=["cosine"], choices=list(tasks.TEXT_SCORES))
+    parser.add_argument("--head-input", nargs="+", default=["x_t"], choices=list(config.HEAD_INPUTS))
+    parser.add_argument("--score", nargs="+", default=["cosine"], choices=list(config.TEXT_SCORES))
     parser.add_argument("--particles", type=int, nargs="+", default=[1],
-                        help="best-of-K (chapter 06 section 11; K > 1 runs with max_time = tasks.PARTICLE_MAX_TIME)")
+                        help="best-of-K (chapter 06 section 11; K > 1 runs with max_time = config.PARTICLE_MAX_TIME)")
     parser.add_argument("--split", default="train", choices=list(descriptions.SPLITS),
                         help="the descriptions' split the texts come from (default: train)")
     parser.add_argument("--vocabulary", action="store_true",
@@ -117,8 +117,8 @@ def main():
         model = baselines.load_baseline("motionclip", DATASET)
         row("MotionCLIP-style", lambda: baselines.generate_from_text(model, texts, encoder=encoder), targets)
         for steps in args.steps:  # not in the paper: the decoder's sequence re-noised and denoised (chapter 06 section 9)
-            row(f"decoder + DDPM (t0={tasks.DECODER_START})", lambda: tasks.decoder_then_diffusion(
-                texts, args.n, steps=steps, seed=0, denoiser=denoiser, decoder=model, encoder=encoder,
+            row(f"decoder + DDPM (t0={config.DECODER_START})", lambda: tasks.decoder_then_diffusion(
+                texts, args.n, steps=steps, seed=0, denoiser=denoiser, decoder=model,
                 progress=False), targets, steps)
     vocabularies = [False, True] if args.vocabulary else [False]
     settings = [tuple(s) for s in args.setting] if args.setting else [None]
@@ -128,21 +128,22 @@ def main():
             continue  # the contrastive score reads x_t only; only it matches a vocabulary
         lam = tasks.text_guidance_weight(score) if setting is None else setting[0]
         lr = (args.lr if args.lr is not None else tasks.text_lr(steps, score=score) if setting is None
-              else tasks.step_scaled_lr(setting[1], tasks.TEXT_LR_REFERENCE_STEPS, steps, power=1.0))
+              else tasks.step_scaled_lr(setting[1], config.TEXT_LR_REFERENCE_STEPS, steps, power=1.0))
         name = f"ours, {score}, {head_input}" + (f", K={k}" if k > 1 else "") + (", vocab." if vocabulary else "")
         row(name, lambda: tasks.text_control(
             texts, args.n, steps=steps, guidance_weight=lam, lr=lr, head_input=head_input, score=score,
-            vocabulary=vocabulary, particles=k, max_time=tasks.PARTICLE_MAX_TIME if k > 1 else None, seed=0,
-            head=head, denoiser=denoiser, encoder=encoder, progress=False), targets, steps, lam, lr)
+            vocabulary=vocabulary, particles=k, max_time=config.PARTICLE_MAX_TIME if k > 1 else None, seed=0,
+            head=head, denoiser=denoiser, progress=False), targets, steps, lam, lr)
     if args.save:
         used = [f"denoiser_{DATASET}", f"guide_{DATASET}_text", f"ic_{DATASET}_{kind}"]
         path = results.save_result(
-            args.save, title=f"text control (Alg. 2), {task}, {args.split} texts, dataset {DATASET}",
-            columns=COLUMNS, rows=rows, checkpoints=used + ([] if args.no_baselines else [f"motionclip_{DATASET}"]),
-            seeds=[0], n=args.n, steps=sorted(set(args.steps)), wall_time_s=time.perf_counter() - t_start,
+            args.save, title=f"text control (Alg. 2), {task}, {args.split} texts, dataset {DATASET}", columns=COLUMNS,
+            rows=rows,
+            run=results.Run(checkpoints=used + ([] if args.no_baselines else [f"motionclip_{DATASET}"]), seeds=[0],
+                            n=args.n, steps=sorted(set(args.steps)), wall_time_s=time.perf_counter() - t_start),
             notes="texts cycle through the classes of the IC (then each class's texts of the split); GT: n test "
                   "sequences picked with numpy seed 0; sampler seed 0; lr: the Adagrad rate at that number of steps; "
-                  "K > 1 with max_time = tasks.PARTICLE_MAX_TIME; FID against the training split from n sequences; "
+                  "K > 1 with max_time = config.PARTICLE_MAX_TIME; FID against the training split from n sequences; "
                   "intervals: 95 % bootstrap over the sequences (Evaluator.score(intervals=True)); seconds: wall "
                   "time of the row")
         print("stored", path)

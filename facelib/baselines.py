@@ -1,9 +1,9 @@
-"""The label-conditioned generative baselines of Table 1 (chapter 05), trained on the same data:
+"""The label-conditioned generative baselines of Table 1 (the label-control chapter), trained on the same data:
 
 * "motion3dgan": Motion3DGAN-style WGAN-GP on SRVFs (models/motion3dgan.py; the paper's "MoGAN");
 * "actor": ACTOR-style transformer CVAE (models/actor.py);
 
-and the text-to-motion baseline of Table 2 (chapter 06):
+and the text-to-motion baseline of Table 2 (the text-control chapter):
 
 * "motionclip": MotionCLIP-style deterministic decoder from the text embedding (models/motionclip.py).
 
@@ -23,7 +23,7 @@ from .models import actor, lstm_filler, motion3dgan, motionclip
 from .text import get_encoder
 
 BASELINES = {"motion3dgan": motion3dgan, "actor": actor, "motionclip": motionclip}
-LABEL_BASELINES = ("motion3dgan", "actor")  # the rows of Table 1 (chapter 05)
+LABEL_BASELINES = ("motion3dgan", "actor")  # the rows of Table 1 (the label-control chapter)
 
 
 def check_baseline(name):

@@ -7,7 +7,7 @@ executes in seconds; the default ("book") mode uses the full values.
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 from pathlib import Path
 
 PROJECT_ROOT = Path(__file__).resolve().parent.parent
@@ -150,7 +150,7 @@ class DenoiserTraining(Optimisation):
 class GuideTraining(Optimisation):
     """The guidance classifiers p_phi(y | x_t, t) of Alg. 1 (type I) and Alg. 4 (type S)."""
 
-    steps: int = 3000  # our choice: ~3 min on 2 CPU cores; accuracy against t is shown in chapter 05
+    steps: int = 3000  # our choice: ~3 min on 2 CPU cores; accuracy against t is shown in the label-control chapter
     lr: float = 3e-4
     warmup: int = 200
     final_lr_fraction: float = 0.05
@@ -190,7 +190,7 @@ class EvaluatorTraining(Optimisation):
     dataset: str = "coma"
     classifier_type: str = "I"
     hidden: int = 128  # §5: one LSTM layer; its width is our choice
-    inputs: str = "motion"  # chapter 01: motion generalises to unseen faces, absolute coordinates do not
+    inputs: str = "motion"  # the face-world chapter: motion generalises to unseen faces, absolute coordinates do not
 
     def fast(self):
         return replace(self, epochs=2)
@@ -248,7 +248,7 @@ class LSTMFillerTraining(Optimisation):
 class DeformationTraining(Optimisation):
     """The deformation networks of Table 5 (S2D: Adam, lr 1e-3, batch 16 meshes)."""
 
-    steps: int = 4000  # our choice: 6 to 14 minutes on one core for the spiral networks (chapter 09)
+    steps: int = 4000  # our choice: 6 to 14 minutes on one core for the spiral networks (the mesh-deformation chapter)
     batch_size: int = 4  # sequences per batch (our choice), frames_per_batch meshes each: S2D's 16
     lr: float = 1e-3  # S2D
     optimizer: str = "adam"
@@ -264,14 +264,75 @@ class DeformationTraining(Optimisation):
 
 
 # ==================================================================================== sampling tasks
-# The command line's defaults (``python -m facelib sample TASK``): the book's best measured settings.
-# ``paper()`` gives the paper's printed algorithm (``--paper``); ``fast()`` a few steps, for tests.
+# Guidance (paper §3.2, §4) and the book's choices, named once.  Each task below gathers its defaults
+# in a frozen dataclass: the book's best measured settings; ``paper()`` gives the paper's printed
+# algorithm (``--paper``) and ``fast()`` a few steps (tests, FACELIB_FAST chapters).
 # steps: reverse steps of a chain respaced from the paper's T = 2000 (None: all 2000).
+ADAGRAD_STEPS = 3  # paper §3.2: "3 steps of the Adagrad update for each diffusion step"
+GUIDANCE_WEIGHT = 0.01  # paper §4: lambda = 0.01 "as in [51]"
+GUIDANCE_METHODS = ("adagrad", "mean_shift")  # Alg. 1; classic classifier guidance (Dhariwal & Nichol)
+# Alg. 1's Adagrad learning rate, per dataset, for a chain of LR_REFERENCE_STEPS reverse steps: not in the
+# paper; each is the pick of the label-control chapter's sweep (48 guided sequences per rate, 200 steps, best
+# accuracy - 2 FID).
+# A rate is a step length in the normalised landmark space, so it depends on the data (tasks.adagrad_lr).
+ADAGRAD_LR = {"coma": 0.03, "bu": 0.1}
+LR_REFERENCE_STEPS = 200
+GEOMETRY_LR = 0.01  # our choice: the Adagrad rate of Alg. 4's type-S guidance in the geometry-adaptive chapter
+HARMONISING_PASSES = 5  # Alg. 4 line 1: "for i = 1 to 5"
+RECONSTRUCTION_SCALE = 2.0  # our choice for reconstruction guidance: the sweep of the geometry-adaptive chapter
+TEXT_DATASET = "coma+bu"  # paper §5.2: text control works on CoMA and BU-4DFE merged (18 actions)
+# Alg. 2's lambda (paper: 0.01) and Adagrad rate (not in the paper) for a chain of TEXT_LR_REFERENCE_STEPS
+# reverse steps: the pick of the text-control chapter's sweep (72 raw-text sequences, 100 steps, best accuracy - 2 FID)
+TEXT_GUIDANCE_WEIGHT = 0.0003
+TEXT_LR = 0.2
+TEXT_LR_REFERENCE_STEPS = 100
+# What the text head reads in Eq. 10: x_t itself (Alg. 2 as written) or, not in the paper, the denoiser's
+# estimate x0_hat of the clean sequence (guidance.DenoisedCosineScore)
+HEAD_INPUTS = ("x_t", "x0_hat")
+# The score that Alg. 2 climbs: the cosine of Eq. 10 (as written) or, not in the paper, the head's own
+# log-probability of the text against the training descriptions of its wording (guidance.ContrastiveScore)
+TEXT_SCORES = ("cosine", "contrastive")
+# The contrastive score's lambda (the paper's 0.01) and Adagrad rate at TEXT_LR_REFERENCE_STEPS steps: the pick
+# of the text-control chapter's sweep (72 sequences, two seeds, best Acc - 2 FID summed over both tasks)
+CONTRASTIVE_GUIDANCE_WEIGHT = 0.01
+CONTRASTIVE_LR = 0.042
+# How sharply a text is matched to the training descriptions by the contrastive score (our choice: an enriched
+# sentence and its other order, at a cosine of about 0.985, get weights of about 0.95 and 0.05)
+MATCH_TEMPERATURE = 0.005
+# Best-of-K particles (not in the paper): the time label at which the K guided chains of each text are compared
+# by the text head, and the time above which they are left unguided (the head reads nothing there); our
+# choices from the text-control chapter's measurements
+SELECT_TIME = 600
+PARTICLE_MAX_TIME = 1400
+DECODER_START = 400  # decoder_then_diffusion's re-noising step (not in the paper): the text-control chapter's sweep
+
+
+def _check_choice(name, value, allowed):
+    if value not in allowed:
+        raise ValueError(f"{name} must be one of {allowed}, got {value!r}")
+
+
+def _check_number(name, value, low=0.0, allow_none=False):
+    if value is None and allow_none:
+        return
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not value >= low:
+        raise ValueError(f"{name} must be a {'non-negative number' if low == 0 else f'number >= {low}'}, got {value!r}")
 
 
 @dataclass(frozen=True)
-class UnconditionalSampling:
-    steps: int | None = 500  # chapter 03 / results/sampling_respacing.json: 500 steps change none of its measures
+class Sampling:
+    """What every sampling task shares: the chain's length, the sequences' length, the seed."""
+
+    steps: int | None = None
+    num_frames: int = 40  # paper §4: 40 frames
+    seed: int = 0
+
+    def __post_init__(self):
+        if self.steps is not None:
+            _check_positive_int("steps", self.steps)
+        _check_positive_int("num_frames", self.num_frames)
+        if isinstance(self.seed, bool) or not isinstance(self.seed, int):
+            raise ValueError(f"seed must be an integer, got {self.seed!r}")
 
     def paper(self):
         return replace(self, steps=None)  # §4: T = 2000
@@ -281,57 +342,139 @@ class UnconditionalSampling:
 
 
 @dataclass(frozen=True)
-class LabelSampling:
-    steps: int | None = 200  # chapter 05: the Adagrad rate was chosen at 200 steps (results/label_steps_coma.json)
-    guidance_weight: float = 0.01  # §4: lambda = 0.01 "as in [51]"
-
-    def paper(self):
-        return replace(self, steps=None)  # Alg. 1 on all T = 2000 steps
-
-    def fast(self):
-        return replace(self, steps=20)
+class Unconditional(Sampling):
+    steps: int | None = 500  # results/sampling_respacing.json: 500 steps change none of the denoiser's measures
+    dataset: str = "coma"  # the denoiser denoiser_<dataset>
 
 
 @dataclass(frozen=True)
-class TextSampling:
-    steps: int | None = 100  # chapter 06: the text guidance was chosen at 100 steps (results/text_sweep_cosine.json)
-    score: str = "cosine"  # Eq. 10 (chapter 06 compares the contrastive score)
+class LabelControl(Sampling):
+    """Alg. 1: 3 Adagrad steps per reverse step on lambda log p_theta + log p_phi (or the classic mean shift)."""
 
-    def paper(self):
-        return replace(self, steps=None, score="cosine")
+    steps: int | None = 200  # the Adagrad rate was chosen at 200 steps (results/label_steps_coma.json)
+    dataset: str = "coma"
+    classifier_type: str = "I"  # paper §5.1: type I (label) for Alg. 1
+    method: str = "adagrad"  # Alg. 1; "mean_shift": Dhariwal & Nichol's classifier guidance
+    guidance_weight: float = GUIDANCE_WEIGHT
+    lr: float | None = None  # None: ADAGRAD_LR of the dataset, scaled to the steps (tasks.adagrad_lr)
+    scale: float = 1.0  # the mean shift's gradient scale s
 
-    def fast(self):
-        return replace(self, steps=20)
+    def __post_init__(self):
+        super().__post_init__()
+        _check_choice("method", self.method, GUIDANCE_METHODS)
+        _check_number("the guidance weight (lambda)", self.guidance_weight)
+        _check_number("lr", self.lr, allow_none=True)
+        _check_number("scale", self.scale)
 
 
 @dataclass(frozen=True)
-class FillSampling:
+class TextControl(Sampling):
+    """Alg. 2: Adagrad steps on lambda log p_theta + score(x, t-1), the score reading the text head."""
+
+    steps: int | None = 100  # the text guidance was chosen at 100 steps (results/text_sweep_cosine.json)
+    dataset: str = TEXT_DATASET
+    score: str = "cosine"  # Eq. 10 (the text-control chapter compares the contrastive score)
+    head_input: str = "x_t"  # Alg. 2 (x0_hat: not in the paper)
+    vocabulary: bool = False  # contrastive score only: match the text against every known description
+    guidance_weight: float | None = None  # None: TEXT_GUIDANCE_WEIGHT, CONTRASTIVE_GUIDANCE_WEIGHT for "contrastive"
+    lr: float | None = None  # None: TEXT_LR (CONTRASTIVE_LR), scaled to the steps (tasks.text_lr)
+    particles: int = 1  # best-of-K: K guided chains per sequence until SELECT_TIME (1: Alg. 2 as written)
+    select_time: float = SELECT_TIME
+    max_time: float | None = None  # leave the steps above this time label unguided (None: guide all)
+
+    def __post_init__(self):
+        super().__post_init__()
+        _check_choice("score", self.score, TEXT_SCORES)
+        _check_choice("head_input", self.head_input, HEAD_INPUTS)
+        if self.score == "contrastive" and self.head_input != "x_t":
+            raise ValueError("the contrastive score reads x_t: use head_input='x_t' with score='contrastive'")
+        if self.vocabulary not in (False, True):
+            raise ValueError(f"vocabulary must be True or False, got {self.vocabulary!r}")
+        if self.vocabulary and self.score != "contrastive":
+            raise ValueError("the vocabulary is matched by the contrastive score: use vocabulary=True with "
+                             "score='contrastive'")
+        _check_positive_int("particles", self.particles)
+        _check_number("select_time", self.select_time, low=1)
+        for name in ("guidance_weight", "lr", "max_time"):
+            _check_number(name, getattr(self, name), allow_none=True)
+
+    def paper(self):
+        return replace(self, steps=None, score="cosine", head_input="x_t", vocabulary=False, particles=1, max_time=None)
+
+
+@dataclass(frozen=True)
+class DecoderThenDiffusion(Sampling):
+    """Not in the paper: the MotionCLIP-style decoder's sequence, re-noised to ``start`` and denoised (SDEdit)."""
+
+    steps: int | None = 100  # the text-control chapter measures it on the chain of text control
+    dataset: str = TEXT_DATASET
+    start: int = DECODER_START  # a step of the paper's chain, 1..T
+
+    def __post_init__(self):
+        super().__post_init__()
+        if isinstance(self.start, bool) or not isinstance(self.start, int) or self.start < 1:
+            raise ValueError(f"start must be a step of the paper's chain (an integer >= 1), got {self.start!r}")
+
+
+@dataclass(frozen=True)
+class Fill(Sampling):
+    """Alg. 3 (expression filling), with the book's additions."""
+
     # Issue 24's measurement (32 coma test sequences, known 0:10,30:40; both seams within the real 95th
     # percentile of frame-to-frame speed): Alg. 3 at 200 steps 34 %, + RePaint r = 4 59 %, + reconstruction
     # guidance zeta = 2 72 %, zeta = 4 75 %; the real sequences themselves 97 %.
     steps: int | None = 200  # our choice: at 100 steps reconstruction guidance joins fewer seams (47 %)
-    reconstruction_scale: float = 2.0  # chapter 07: reconstruction guidance joins the generated frames to the known
+    dataset: str = "coma"
+    reconstruction_scale: float = RECONSTRUCTION_SCALE  # the filling chapter: joins the generated frames to the known
     resample: int = 1  # RePaint's r: with reconstruction guidance at 100 steps, r = 2 adds 6 points at twice the cost
+
+    def __post_init__(self):
+        super().__post_init__()
+        _check_number("the reconstruction guidance scale", self.reconstruction_scale)
+        _check_positive_int("resample", self.resample)
 
     def paper(self):
         return replace(self, steps=None, reconstruction_scale=0.0, resample=1)  # Alg. 3 as printed
 
-    def fast(self):
-        return replace(self, steps=20)
-
 
 @dataclass(frozen=True)
-class GeometrySampling:
-    steps: int | None = 100  # chapter 08 and 10: the respaced chain of `animate`
-    passes: int = 1  # chapter 08: the harmonising passes of Alg. 4 add nothing measurable
-    reconstruction_scale: float = 2.0  # chapter 08: the sweep of zeta; joins the frames to the given face
+class GeometryAdaptive(Sampling):
+    """Alg. 4 (geometry-adaptive generation with the type-S classifier), with the book's additions."""
+
+    steps: int | None = 100  # the geometry-adaptive and end-to-end chapters: the respaced chain of `animate`
+    dataset: str = "coma"
+    order: str | None = None  # the neutral face first ("N2E", the default) or last ("E2N"), unless the label says
+    passes: int = 1  # the geometry-adaptive chapter: the harmonising passes of Alg. 4 add nothing measurable
+    renoise_step: int | None = None  # pass i > 1 re-noises to this step (None: to T, as the paper)
+    resample: int = 1  # RePaint's r within each pass (1: Alg. 4 as written)
+    reconstruction_scale: float = RECONSTRUCTION_SCALE  # the sweep of zeta (geometry-adaptive chapter)
+    guidance_weight: float = GUIDANCE_WEIGHT
+    lr: float = GEOMETRY_LR
+
+    def __post_init__(self):
+        super().__post_init__()
+        _check_positive_int("passes", self.passes)
+        _check_positive_int("resample", self.resample)
+        _check_number("the reconstruction guidance scale", self.reconstruction_scale)
+        _check_number("the guidance weight (lambda)", self.guidance_weight)
+        _check_number("lr", self.lr)
 
     def paper(self):
-        return replace(self, steps=None, passes=5, reconstruction_scale=0.0)  # Alg. 4 as printed: 5 passes
+        return replace(self, steps=None, passes=HARMONISING_PASSES, reconstruction_scale=0.0, resample=1)
 
     def fast(self):
         return replace(self, steps=10)
 
 
-SAMPLING = {"unconditional": UnconditionalSampling(), "label": LabelSampling(), "text": TextSampling(),
-            "fill": FillSampling(), "geometry": GeometrySampling()}
+SAMPLING = {"unconditional": Unconditional(), "label": LabelControl(), "text": TextControl(), "fill": Fill(),
+            "geometry": GeometryAdaptive()}
+
+
+def with_overrides(settings, overrides):
+    """``settings`` with the fields named in ``overrides`` changed (a clear error for a name it has not)."""
+    allowed = [f.name for f in fields(settings)]
+    unknown = sorted(set(overrides) - set(allowed))
+    if unknown:
+        raise ValueError(f"{type(settings).__name__} has no setting {', '.join(unknown)}; its settings: "
+                         f"{', '.join(allowed)}")
+    return replace(settings, **overrides)

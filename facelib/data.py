@@ -380,7 +380,7 @@ def merge(parts, name):
 
 
 def composed_performances(dataset, labels, kind="N2E", seed=0):
-    """The synthetic world's own composition of expressions (chapter 06 section 6; no dataset holds
+    """The synthetic world's own composition of expressions (the compositions of text control; no dataset holds
     one): for every subject of ``dataset`` (a FaceDataset), one performance of each label in
     ``labels`` (one or two names), combined as FACS combines action units, per AU the stronger of
     the performances (a per-AU maximum of the apex intensities), then played as one ``kind``

@@ -1,4 +1,4 @@
-"""Landmark-guided mesh deformation as a task (paper §3.3, §6, Table 5; chapters 09 and 10).
+"""Landmark-guided mesh deformation as a task (paper §3.3, §6, Table 5; the mesh-deformation and end-to-end chapters).
 
 Training pairs come from the synthetic CoMA-like world, where every landmark sequence has its
 ground-truth meshes: for sequence i and frame f, the input is the subject's neutral mesh M and

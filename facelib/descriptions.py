@@ -1,4 +1,4 @@
-"""Text descriptions of the 18 actions for text control (paper §5.2, Table 2; chapter 06).
+"""Text descriptions of the 18 actions for text control (paper §5.2, Table 2; the text-control chapter).
 
 * Raw text (the paper's "raw text" task): the label written as words, "high smile".
 * Paraphrases: other ways to say the same thing, grounded in what the synthetic world's recipe of
@@ -8,7 +8,7 @@
 * Enriched text (the paper's "enriched text" task, type-S evaluation): the order of the
   expression in words, "from the neutral face to X" (N2E) and "from X to the neutral face" (E2N),
   with training and held-out sentence templates.
-* Written blind (not in the paper; chapter 06 section 12): two more sets of phrasings and templates,
+* Written blind (not in the paper; the vocabulary of text control): two more sets of phrasings and templates,
   each written by a writer (a language model given a fresh context) who saw only the labels and the
   action units they move (:func:`writers_spec`), never the texts above nor each other's.
   - "vocabulary": the train descriptions and the first writer's.  No network is trained on them:

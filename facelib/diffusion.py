@@ -12,12 +12,14 @@ float64 (numpy) and owns every closed form:
 * ``p_mean_variance``    mu_theta(x_t, t) = (x_t - beta_t / sqrt(1 - abar_t) eps_theta) / sqrt(alpha_t)  (Eq. 7,
                          in its correct form: the paper prints sqrt(1 - alpha_t))
 * ``p_sample``           x_{t-1} ~ p_theta(x_{t-1} | x_t) = N(mu_theta, sigma_t^2 I), sigma_t^2 = beta_t  (Eq. 5, §4)
-* ``sample``             the whole reverse chain from x_T ~ N(0, I), with a progress bar and a per-step callback
+* ``sample``, ``run``    the reverse chain from x_T ~ N(0, I), or any part of it from a given x (``schedule``)
 * ``training_loss``      E ||eps - eps_theta(x_t, t)||^2                                           (Eq. 8)
 * ``respace``            the same model on a subset of the steps (fewer steps, no retraining)
 
-The network is called as ``model(x_t, t_model, mask)`` where ``t_model`` is the step of the
-*original* schedule (respaced diffusions keep that mapping in ``timesteps``).
+Respacing (Nichol & Dhariwal 2021; guided-diffusion's ``respace.py``): a respaced chain keeps the steps
+``timesteps`` of the original schedule and numbers them 1..K.  Everything outside this module speaks in the
+chain's own steps t; :meth:`GaussianDiffusion.wrap` gives a network (denoiser, classifier, text head) that
+is called with the chain's step and receives its own time label, ``timesteps[t]``, inside the call.
 """
 from __future__ import annotations
 
@@ -65,6 +67,35 @@ def _extract(array, t, x):
     return values.reshape(values.shape + (1,) * (x.ndim - values.ndim))
 
 
+class TimeMapped(torch.nn.Module):
+    """A network seen through a (respaced) chain: called as ``net(x, t, ...)``, ``net.log_prob(x, t, ...)``,
+    ``net.embed(x, t, ...)`` or ``net.cosine(x, t, ...)`` with the chain's step t (an int or a (B,) tensor),
+    it feeds the network its own time label ``timesteps[t]`` (guided-diffusion's ``_WrappedModel``)."""
+
+    def __init__(self, network, timesteps):
+        super().__init__()
+        self.network = network
+        self.timesteps = torch.as_tensor(timesteps, dtype=torch.float32)
+
+    def time(self, t, x):
+        """The network's time labels (B,) for the chain's step t and a batch x."""
+        t = torch.as_tensor(t, device="cpu")
+        labels = self.timesteps[t.round().long()]
+        return (labels.expand(len(x)) if labels.ndim == 0 else labels).to(x.device)
+
+    def forward(self, x, t, *args, **kwargs):
+        return self.network(x, self.time(t, x), *args, **kwargs)
+
+    def log_prob(self, x, t, *args, **kwargs):
+        return self.network.log_prob(x, self.time(t, x), *args, **kwargs)
+
+    def embed(self, x, t, *args, **kwargs):
+        return self.network.embed(x, self.time(t, x), *args, **kwargs)
+
+    def cosine(self, x, t, *args, **kwargs):
+        return self.network.cosine(x, self.time(t, x), *args, **kwargs)
+
+
 class GaussianDiffusion:
     """Every closed form of a DDPM with the given betas (beta_1..beta_T), t 1-based.
 
@@ -95,6 +126,7 @@ class GaussianDiffusion:
             self.eps_coef = np.nan_to_num(self.betas / self.sqrt_one_minus_alphas_bar)
         self.sigmas = np.sqrt(self.betas if variance == "beta" else self.posterior_variance)
         self.timesteps = np.arange(self.num_steps + 1) if timesteps is None else np.asarray(timesteps)
+        self.time_labels = torch.as_tensor(self.timesteps, dtype=torch.float32)  # the networks' time of each step
 
     def __repr__(self):
         return f"GaussianDiffusion(T={self.num_steps}, variance={self.variance!r})"
@@ -125,9 +157,16 @@ class GaussianDiffusion:
         """The time label fed to the network for step t of this (maybe respaced) schedule, shape (batch,)."""
         return torch.full((batch,), float(self.timesteps[t]))
 
+    def wrap(self, network):
+        """``network`` called with this chain's steps (see :class:`TimeMapped`); a network already wrapped
+        for this chain is returned as it is."""
+        if isinstance(network, TimeMapped) and torch.equal(network.timesteps, self.time_labels):
+            return network
+        return TimeMapped(network, self.time_labels)
+
     def p_mean_variance(self, model, xt, t, mask=None):
         """Mean and variance of p_theta(x_{t-1} | x_t) from eps_theta (Eq. 7, correct form), and x0_hat."""
-        eps = model(xt, self.model_time(t, xt.shape[0]).to(xt.device), mask)
+        eps = self.wrap(model)(xt, t, mask)
         mean = (xt - _extract(self.eps_coef, t, xt) * eps) / _extract(np.sqrt(self.alphas), t, xt)
         return {"mean": mean, "variance": _extract(self.sigmas ** 2, t, xt), "eps": eps,
                 "x0": self.predict_x0(xt, t, eps)}
@@ -148,39 +187,49 @@ class GaussianDiffusion:
             x = x * mask[:, :, None, None]
         return x, out
 
-    def sample(self, model, shape, seed=0, x_T=None, mask=None, guide=None, callback=None, progress=True,
-               start_step=None, resample=1, end_step=0, generator=None):
-        """Run the reverse chain from x_T ~ N(0, I) down to x_0 and return x_0.
+    def schedule(self, start=None, end=0, resample=1):
+        """The chain's steps in the order they are run, from ``start`` (None: T) down to ``end`` + 1.
 
-        shape: (batch, frames, 68, 3).  callback(t, x_{t-1}, out) is called after every step
-        (for animations and the downstream tasks).  Deterministic for a given seed.
-        start_step: begin at a step k < T instead, with ``x_T`` holding x_k (SDEdit-style re-noising).
-        resample: RePaint's resampling (Lugmayr et al. 2022, jump length 1): every step t > 1 is run
-        ``resample`` times, x_{t-1} being re-noised back to x_t ~ q(x_t | x_{t-1}) (Eq. 2) in between,
-        so that conditioned parts (the known frames of Alg. 3) and generated parts can harmonise.
-        end_step: stop at x_k for a step k > 0 instead and return it (to pick among chains half-way,
-        :func:`facelib.tasks.text_control`'s particles; start_step=k continues them).
-        generator: a torch.Generator to draw from instead of a fresh one seeded with ``seed`` (so that a
-        chain stopped at end_step continues with the rest of its random stream).
-        """
+        resample: RePaint's resampling (Lugmayr et al. 2022, jump length 1): every step t > 1 appears
+        ``resample`` times in a row; between two runs of it, x_{t-1} is re-noised back to x_t ~ q(x_t | x_{t-1})
+        (Eq. 2), so that conditioned parts (the known frames of Alg. 3) and generated parts can harmonise.
+        end > 0 stops at x_end (to pick among chains half-way; ``start=end`` continues them)."""
+        start = self.num_steps if start is None else start
         if isinstance(resample, bool) or not isinstance(resample, (int, np.integer)) or resample < 1:
             raise ValueError(f"resample must be a positive integer, got {resample!r}")
-        start_step = self.num_steps if start_step is None else start_step
-        if not 1 <= start_step <= self.num_steps:
-            raise ValueError(f"start_step must be in 1..{self.num_steps}, got {start_step}")
-        if isinstance(end_step, bool) or not isinstance(end_step, (int, np.integer)) or not 0 <= end_step < start_step:
-            raise ValueError(f"end_step must be an integer in 0..{start_step - 1} (below start_step), got {end_step!r}")
-        generator = torch.Generator().manual_seed(seed) if generator is None else generator
+        if isinstance(start, bool) or not isinstance(start, (int, np.integer)) or not 1 <= start <= self.num_steps:
+            raise ValueError(f"the start step must be an integer in 1..{self.num_steps}, got {start!r}")
+        if isinstance(end, bool) or not isinstance(end, (int, np.integer)) or not 0 <= end < start:
+            raise ValueError(f"the end step must be an integer in 0..{start - 1} (below the start), got {end!r}")
+        return [t for t in range(start, end, -1) for _ in range(resample if t > 1 else 1)]
+
+    def sample(self, model, shape, seed=0, guide=None, callback=None, progress=True, mask=None):
+        """x_0 from the whole reverse chain, started at x_T ~ N(0, I) of ``shape`` (batch, frames, 68, 3).
+
+        callback(t, x_{t-1}, out) is called after every step (for animations and the downstream tasks);
+        ``guide`` is the sampler hook of Alg. 1-4 (:meth:`p_sample`).  Deterministic for a given seed."""
+        generator = seed if isinstance(seed, torch.Generator) else torch.Generator().manual_seed(seed)
+        return self.run(model, torch.randn(shape, generator=generator), generator, None, guide, callback, progress,
+                        mask)
+
+    def run(self, model, x, seed=0, steps=None, guide=None, callback=None, progress=True, mask=None):
+        """Run the chain's ``steps`` (:meth:`schedule`; None: all, from T) on x, which holds x at the first
+        of them (x_T, or x_k to continue a chain or re-noised data, SDEdit); returns x after the last.
+
+        seed: an int, or a torch.Generator to continue its random stream (a chain stopped half-way continues
+        exactly as if it had not stopped).  A step that repeats the one before is RePaint's resampling:
+        x_{t-1} is first re-noised back to x_t (Eq. 2)."""
+        generator = seed if isinstance(seed, torch.Generator) else torch.Generator().manual_seed(seed)
+        steps = self.schedule() if steps is None else list(steps)
         device = next(model.parameters()).device if hasattr(model, "parameters") else torch.device("cpu")
-        x = torch.randn(shape, generator=generator).to(device) if x_T is None else x_T.to(device)
+        x = x.to(device)
         if mask is not None:
             x = x * mask[:, :, None, None]
-        for t in tqdm(range(start_step, end_step, -1), desc="sampling", disable=not progress, leave=False):
-            for r in range(resample if t > 1 else 1):
-                if r > 0:
-                    x = self.q_step(x, t, generator)
-                x, out = self.p_sample(model, x, t, generator, mask, guide)
-            if callback is not None:
+        for i, t in enumerate(tqdm(steps, desc="sampling", disable=not progress, leave=False)):
+            if i > 0 and t == steps[i - 1]:
+                x = self.q_step(x, t, generator)
+            x, out = self.p_sample(model, x, t, generator, mask, guide)
+            if callback is not None and (i + 1 == len(steps) or steps[i + 1] != t):
                 callback(t, x, out)
         return x
 

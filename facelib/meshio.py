@@ -1,5 +1,6 @@
-"""Mesh files in and out (chapter 10; ``python -m facelib animate``); named so that it shadows no standard module, and importing nothing above the face world: OBJ read with a topology
-check, an animated sequence written as one OBJ per frame plus a GIF, all or nothing."""
+"""Mesh files in and out (the end-to-end chapter; ``python -m facelib animate``): OBJ read with a topology
+check, an animated sequence written as one OBJ per frame plus a GIF, all or nothing.  Named so that it
+shadows no standard module; it imports nothing above the face world."""
 from __future__ import annotations
 
 import shutil

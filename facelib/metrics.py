@@ -1,5 +1,5 @@
 """Evaluation metrics (paper §5): accuracy, confusion matrix, FID, diversity, the realism checks of
-chapter 03 and the filling metrics of chapters 07-08 (error on missing frames, seam smoothness)."""
+the denoiser chapter and the filling metrics (error on missing frames, seam smoothness)."""
 from __future__ import annotations
 
 import numpy as np
@@ -162,7 +162,7 @@ def bootstrap_interval(statistic, *samples, num_resamples=1000, level=0.95, seed
     (1 + level) / 2 quantiles of the statistic over the resamples are shifted by the bootstrap's
     estimate of its bias, mean(resampled values) - statistic(samples), and returned as (low, high).
     The shift matters for FID and diversity: a resample repeats some sequences, which acts like
-    fewer distinct sequences, and FID grows as n shrinks (chapter 04), so the plain percentile
+    fewer distinct sequences, and FID grows as n shrinks (the evaluation chapter), so the plain percentile
     interval of an FID lies above the FID itself.  For a mean (accuracy) the shift is about 0.
     This is the interval of every Acc, FID and diversity the book compares: how much the number
     would move with another draw of the same number of sequences.

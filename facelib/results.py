@@ -18,6 +18,7 @@ import json
 import os
 import subprocess
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 import torch
@@ -76,26 +77,37 @@ def checkpoint_sha256(name):
     return json.loads(js.read_text())["sha256"]
 
 
-def save_result(name, *, title, columns, rows, checkpoints, seeds, n, steps, wall_time_s, notes="",
-                command=None):
-    """Write results/NAME.json atomically; returns its path.
+@dataclass(frozen=True)
+class Run:
+    """How a stored result was measured: the shipped checkpoints it used (their sha256 are read from
+    data/checkpoints), the seeds, the sequences per row, the reverse steps, its wall time, and the
+    command that rewrites it (None: the command line of this process)."""
+
+    checkpoints: list
+    seeds: list
+    n: int
+    steps: list
+    wall_time_s: float
+    command: str | None = None
+
+
+def save_result(name, title, columns, rows, run, notes=""):
+    """Write results/NAME.json (the table and its :class:`Run`) atomically; returns its path.
 
     ``columns`` names the entries of every row (a row is a list, one entry per column: a number, a
-    string, or a [low, high] 95 % interval).  ``checkpoints`` lists the names of the shipped
-    checkpoints used; their sha256 are read from data/checkpoints.
-    """
+    string, or a [low, high] 95 % interval)."""
     path = result_path(name)
     bad = [r for r in rows if len(r) != len(columns)]
     if bad:
         raise ValueError(f"every row needs {len(columns)} entries ({columns}), got {bad[0]}")
     record = {
         "schema": SCHEMA, "name": name, "title": title,
-        "command": command or invoking_command(),
+        "command": run.command or invoking_command(),
         "commit": facelib_commit(),
         "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
-        "checkpoints": {c: checkpoint_sha256(c) for c in sorted(checkpoints)},
-        "seeds": [int(s) for s in seeds], "n": int(n), "steps": [int(s) for s in steps],
-        "wall_time_s": round(float(wall_time_s), 1), "cores": os.cpu_count() or 0,
+        "checkpoints": {c: checkpoint_sha256(c) for c in sorted(run.checkpoints)},
+        "seeds": [int(s) for s in run.seeds], "n": int(run.n), "steps": [int(s) for s in run.steps],
+        "wall_time_s": round(float(run.wall_time_s), 1), "cores": os.cpu_count() or 0,
         "torch_threads": torch.get_num_threads(), "columns": list(columns), "rows": _plain(rows),
         "notes": notes,
     }

@@ -1,12 +1,12 @@
 """From landmarks back to a face mesh by fitting the synthetic world's AU rig (a stand-in for the
 FLAME fitting that paper §6 compares against, footnote 1: 470 s per sequence there).
 
-Until the learned landmark-guided deformation of chapter 09 exists, this is how chapters 05-08
-show generated landmark sequences as faces: choose the known face whose neutral landmarks fit
+Before the learned landmark-guided deformation of the mesh-deformation chapter, this is how the
+chapters show generated landmark sequences as faces: choose the known face whose neutral landmarks fit
 the sequence's neutral end best, then solve for the AU intensities of every frame by projected
 Gauss-Newton on the landmark error, and evaluate the rig.  It only works for faces of our
 synthetic world (the rig must be known), which is exactly the limitation that the deformation
-network of chapter 09 removes.
+network of the mesh-deformation chapter removes.
 """
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
 """Square-root velocity fields (SRVF) on the unit hypersphere: the representation of Motion3DGAN
-(papers/motion3dgan-s2d-otberdout2022, Eq. 2, 3, 6), the GAN baseline of chapter 05.
+(papers/motion3dgan-s2d-otberdout2022, Eq. 2, 3, 6), the GAN baseline of the label-control chapter.
 
 A landmark motion alpha: [0, 1] -> R^204 (F frames, dt = 1 / (F - 1)) becomes
 

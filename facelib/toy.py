@@ -1,4 +1,4 @@
-"""A 2-D toy for chapter 02: a smiley-face point cloud and a small MLP noise predictor.
+"""A 2-D toy for the DDPM chapter: a smiley-face point cloud and a small MLP noise predictor.
 
 The same :class:`~facelib.diffusion.GaussianDiffusion` that drives the landmark model works on
 any tensor shape, so a 2-D toy trained in seconds shows the whole DDPM: the forward process

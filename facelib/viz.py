@@ -11,6 +11,7 @@ import inspect
 import io
 import os
 import warnings
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -130,35 +131,44 @@ def render_face(vertices, **kwargs):
         r.close()
 
 
-def face_grid(meshes, titles=None, ncols=6, size=(240, 300), view="front", panel_width=2.0,
-              scalars=None, cmap="magma_r", clim=None, colorbar_label="mm", **kwargs):
-    """A matplotlib figure with one rendered face per panel (all with the same camera).
+@dataclass(frozen=True)
+class Heatmap:
+    """Per-vertex values shown on the faces of :func:`face_grid`: one array per mesh, coloured with ``cmap``
+    within ``clim`` (None: from 0 to the largest value) under a shared colour bar labelled ``label``."""
 
-    ``scalars``: optional list of per-vertex values (one array per mesh) shown with ``cmap``
-    within ``clim`` and a shared colour bar labelled ``colorbar_label``.
-    """
+    values: list
+    cmap: str = "magma_r"
+    clim: tuple | None = None
+    label: str = "mm"
+
+
+def face_grid(meshes, titles=None, ncols=6, size=(240, 300), view="front", panel_width=2.0, heatmap=None,
+              **render):
+    """A matplotlib figure with one rendered face per panel (all with the same camera), optionally
+    coloured by a :class:`Heatmap`; ``render`` goes to :meth:`FaceRenderer.render`."""
     meshes = list(meshes)
     nrows = int(np.ceil(len(meshes) / ncols))
     ncols = min(ncols, len(meshes))
     fig, axes = plt.subplots(nrows, ncols, figsize=(panel_width * ncols, panel_width * 1.25 * nrows),
                              squeeze=False)
-    if scalars is not None and clim is None:
-        clim = (0.0, float(max(np.max(v) for v in scalars)))
+    clim = None
+    if heatmap is not None:
+        clim = heatmap.clim or (0.0, float(max(np.max(v) for v in heatmap.values)))
     renderer = FaceRenderer(size=size, view=view)
     try:
         for k, ax in enumerate(axes.ravel()):
             ax.axis("off")
             if k < len(meshes):
-                extra = {} if scalars is None else dict(scalars=scalars[k], cmap=cmap, clim=clim)
-                ax.imshow(renderer.render(meshes[k], **extra, **kwargs))
+                extra = {} if heatmap is None else dict(scalars=heatmap.values[k], cmap=heatmap.cmap, clim=clim)
+                ax.imshow(renderer.render(meshes[k], **extra, **render))
                 if titles is not None:
                     ax.set_title(titles[k])
     finally:
         renderer.close()
     fig.tight_layout()
-    if scalars is not None:
-        sm = plt.cm.ScalarMappable(cmap=cmap, norm=plt.Normalize(*clim))
-        fig.colorbar(sm, ax=axes.ravel().tolist(), shrink=0.6, label=colorbar_label)
+    if heatmap is not None:
+        sm = plt.cm.ScalarMappable(cmap=heatmap.cmap, norm=plt.Normalize(*clim))
+        fig.colorbar(sm, ax=axes.ravel().tolist(), shrink=0.6, label=heatmap.label)
     return fig
 
 

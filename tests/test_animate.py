@@ -74,7 +74,7 @@ def test_animate_writes_obj_frames_a_gif_and_the_landmarks(tmp_path, face_obj):
 @pytest.mark.parametrize("args, message", [
     (["--label", "wink"], "unknown label"),
     (["--label", "mouth_open", "--mesh", "SPHERE"], "the template topology has"),
-    (["--label", "mouth_open", "--steps", "0"], "respace to 1..2000 steps, got 0"),
+    (["--label", "mouth_open", "--steps", "0"], "steps must be a positive integer, got 0"),
 ])
 def test_animate_refuses_bad_input_and_writes_nothing(tmp_path, face_obj, capsys, args, message):
     sphere = tmp_path / "sphere.obj"

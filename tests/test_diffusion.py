@@ -138,11 +138,19 @@ def test_a_chain_stopped_at_end_step_continues_exactly_on_its_generator():
     model = lambda x, t, mask: 0.1 * x  # noqa: E731
     whole = d.sample(model, (4, 3), seed=5, progress=False)
     g = torch.Generator().manual_seed(5)
-    x7 = d.sample(model, (4, 3), progress=False, end_step=7, generator=g)
-    torch.testing.assert_close(d.sample(model, (4, 3), x_T=x7, start_step=7, progress=False, generator=g), whole)
+    x7 = d.run(model, torch.randn((4, 3), generator=g), g, d.schedule(end=7), progress=False)
+    torch.testing.assert_close(d.run(model, x7, g, d.schedule(start=7), progress=False), whole)
     for bad in (-1, 20, 1.5, True):
-        with pytest.raises(ValueError, match="end_step"):
-            d.sample(model, (4, 3), progress=False, end_step=bad)
+        with pytest.raises(ValueError, match="the end step must be an integer in 0..19"):
+            d.schedule(end=bad)
+
+
+def test_the_schedule_repeats_each_step_for_repaint_and_runs_from_start_to_end():
+    d = GaussianDiffusion(linear_betas(5))
+    assert d.schedule() == [5, 4, 3, 2, 1] and d.schedule(start=3, end=1) == [3, 2]
+    assert d.schedule(resample=2) == [5, 5, 4, 4, 3, 3, 2, 2, 1]  # step 1 is never re-noised
+    with pytest.raises(ValueError, match="resample must be a positive integer"):
+        d.schedule(resample=0)
 
 
 def test_respacing_keeps_alpha_bar_and_time_labels():

@@ -147,8 +147,8 @@ def test_fill_keeps_known_frames_exactly_and_is_deterministic(coma_test, denoise
 def test_geometry_adaptive_keeps_the_neutral_frame_and_checks_input(coma_test, denoiser):
     guide = tasks.load_guide("coma", "S")
     neutral = coma_test.subject_neutrals()[0]
-    out = tasks.geometry_adaptive(neutral, "mouth_open", n=2, steps=8, passes=2, denoiser=denoiser, guide=guide,
-                                  return_passes=True, progress=False)
+    out = tasks.geometry_passes(neutral, "mouth_open", n=2, steps=8, passes=2, denoiser=denoiser, guide=guide,
+                                progress=False)
     assert out.shape == (2, 2, 40, 68, 3)
     assert np.array_equal(out[:, :, 0], np.broadcast_to(neutral, (2, 2, 68, 3)).astype(np.float32))
     e2n = tasks.geometry_adaptive(neutral, "mouth_open E2N", n=1, steps=8, passes=1, denoiser=denoiser, guide=guide,

@@ -3,9 +3,9 @@ import numpy as np
 import pytest
 import torch
 
-from facelib import evaluation, tasks
+from facelib import config, evaluation, tasks
 from facelib.diffusion import GaussianDiffusion, linear_betas
-from facelib.guidance import MeanShiftGuidance, OptimisationGuidance, classifier_score, log_p_theta
+from facelib.guidance import ClassifierScore, MeanShiftGuidance, OptimisationGuidance, log_p_theta
 from facelib.models.noisy_classifier import NoisyClassifier, NoisyClassifierConfig
 
 
@@ -43,7 +43,7 @@ def test_one_guided_step_increases_the_class_log_probability(small):
     # Alg. 1 line 10 with lambda = 0: pure ascent of log p_phi(y | x, t-1) from x_hat_{t-1}.
     clf, diffusion = small
     labels = torch.tensor([0, 1, 2, 1])
-    score = classifier_score(clf, labels)
+    score = ClassifierScore(clf, labels)
     xt = torch.randn(4, 10, 68, 3)
     out = {"mean": xt * 0.9, "variance": torch.full((4, 1, 1, 1), 0.01)}
     x_hat = out["mean"] + 0.1 * torch.randn_like(xt)
@@ -61,7 +61,7 @@ def test_one_guided_step_increases_the_class_log_probability(small):
 
 def test_mean_shift_guidance_moves_along_the_gradient(small):
     clf, diffusion = small
-    score = classifier_score(clf, torch.tensor([2, 2]))
+    score = ClassifierScore(clf, torch.tensor([2, 2]))
     xt = torch.randn(2, 8, 68, 3)
     out = {"mean": xt, "variance": torch.full((2, 1, 1, 1), 0.02)}
     x_hat = xt + 0.1
@@ -77,7 +77,7 @@ def test_mean_shift_guidance_moves_along_the_gradient(small):
 def test_guidance_rejects_bad_settings(small, kwargs, message):
     clf, diffusion = small
     with pytest.raises(ValueError, match=message):
-        OptimisationGuidance(classifier_score(clf, [0]), diffusion, **kwargs)
+        OptimisationGuidance(ClassifierScore(clf, [0]), diffusion, **kwargs)
 
 
 def test_label_control_errors():
@@ -98,9 +98,9 @@ def test_label_control_errors():
 
 
 def test_default_adagrad_rate_is_the_sweep_pick_at_200_steps_and_scales_with_sqrt_steps():
-    for dataset, lr in tasks.ADAGRAD_LR.items():
-        assert tasks.adagrad_lr(dataset, tasks.LR_REFERENCE_STEPS) == pytest.approx(lr)
-        assert tasks.adagrad_lr(dataset, None) == pytest.approx(lr * np.sqrt(tasks.LR_REFERENCE_STEPS / 2000))
+    for dataset, lr in config.ADAGRAD_LR.items():
+        assert tasks.adagrad_lr(dataset, config.LR_REFERENCE_STEPS) == pytest.approx(lr)
+        assert tasks.adagrad_lr(dataset, None) == pytest.approx(lr * np.sqrt(config.LR_REFERENCE_STEPS / 2000))
         assert tasks.adagrad_lr(dataset, 50) == pytest.approx(2 * lr)
     with pytest.raises(ValueError, match="no default Adagrad learning rate for dataset 'coma\\+bu'.*pass lr="):
         tasks.adagrad_lr("coma+bu", 200)
@@ -134,6 +134,6 @@ def test_cli_label_task_writes_npz(tmp_path):
     assert npz["landmarks"].shape == (2, 40, 68, 3) and npz["landmarks"].dtype == np.float32
     assert list(npz["labels"]) == ["high_smile", "high_smile"]
     assert '"guidance_weight": 0.01' in str(npz["config"])
-    assert f'"adagrad_lr": {tasks.adagrad_lr("coma", 5)}' in str(npz["config"])
+    assert f'"lr": {tasks.adagrad_lr("coma", 5)}' in str(npz["config"])
     with pytest.raises(SystemExit):
         main(["sample", "label", "--label", "grin", "--n", "2", "--steps", "5", "--out", str(out)])

@@ -16,8 +16,9 @@ def tmp_results(tmp_path, monkeypatch):
 
 def _save(name="demo", **overrides):
     kwargs = dict(title="a demo", columns=["method", "Acc (%)", "95 % interval"],
-                  rows=[["ours", 80.0, [75.0, 85.0]]], checkpoints=["ic_coma_I"], seeds=[0], n=8, steps=[20],
-                  wall_time_s=1.0, command="python -m facelib experiment demo")
+                  rows=[["ours", 80.0, [75.0, 85.0]]],
+                  run=results.Run(checkpoints=["ic_coma_I"], seeds=[0], n=8, steps=[20], wall_time_s=1.0,
+                                  command="python -m facelib experiment demo"))
     kwargs.update(overrides)
     return results.save_result(name, **kwargs)
 
@@ -80,7 +81,7 @@ def test_bad_names_rows_and_checkpoints_are_refused(tmp_results):
     with pytest.raises(ValueError, match="every row needs 3 entries"):
         _save(rows=[["ours", 1.0]])
     with pytest.raises(FileNotFoundError, match="no_such_model"):
-        _save(checkpoints=["no_such_model"])
+        _save(run=results.Run(checkpoints=["no_such_model"], seeds=[0], n=8, steps=[20], wall_time_s=1.0))
     with pytest.raises(FileNotFoundError, match="--save missing"):
         results.load_result("missing")
     assert not list(tmp_results.iterdir())

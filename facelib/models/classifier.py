@@ -2,7 +2,7 @@
 
 The IC reads a landmark sequence (B, F, 68, 3) in mm and predicts its label.  By default it
 looks at *motion*: each sequence minus its own mean shape over the frames.  Our choice, and a
-measured one (chapter 01): with only 9 training subjects, an LSTM on raw coordinates memorises
+measured one (the face-world chapter): with only 9 training subjects, an LSTM on raw coordinates memorises
 the anatomy of those subjects and fails on new ones; removing the sequence's mean shape keeps
 everything about the expression (including N2E vs E2N order) and drops the anatomy.
 ``inputs="absolute"`` gives the raw-coordinate variant for comparison.

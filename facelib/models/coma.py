@@ -1,4 +1,4 @@
-"""The "CoMA" baseline of Table 5 (paper §6, after Ranjan et al. [73]; chapter 09).
+"""The "CoMA" baseline of Table 5 (paper §6, after Ranjan et al. [73]; the mesh-deformation chapter).
 
 CoMA's mesh autoencoder uses Chebyshev spectral convolutions (order K = 6) with mesh pooling.  As
 in §6 its decoder, which originally decodes the latent code of the input mesh, consumes the

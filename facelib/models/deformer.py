@@ -1,4 +1,4 @@
-"""Landmark-guided mesh deformation (paper §3.3, Eq. 11, Fig. 1; chapter 09).
+"""Landmark-guided mesh deformation (paper §3.3, Eq. 11, Fig. 1; the mesh-deformation chapter).
 
 Given a neutral mesh M (V, 3) of the template topology and one frame's landmark displacement
 Delta L_f = L_f - L (68, 3), predict the per-vertex displacement Delta M_f; M_f = M + Delta M_f.
@@ -9,7 +9,7 @@ Delta L_f = L_f - L (68, 3), predict the per-vertex displacement Delta M_f; M_f 
   parts of *this* face matter for *this* motion.  A linear layer maps it to z_id (204 values).
 * z = lambda_theta z_id + Delta L_f, lambda_theta learnable.  Its initial value is not in the paper;
   we start at 1, since at 0 the encoder receives no gradient (dz/dz_id = lambda_theta) and the
-  network stays S2D (chapter 09, exercise 1).
+  network stays S2D (the mesh-deformation chapter, exercise 1).
 * Decoder (S2D's): a linear layer to 80 x d, then five spiral layers with unpooling between
   levels, giving Delta M_f (V, 3).
 

@@ -2,11 +2,11 @@
 
 The tokens are FE(x_t) + PE(1..F) + TE(t), one per frame (models/bit.py); the encoder is
 bidirectional: every frame attends to every other frame, past and future, which is what
-expression filling (chapter 07) needs.  Padded frames of a batch of mixed lengths are excluded
+expression filling (the filling chapter) needs.  Padded frames of a batch of mixed lengths are excluded
 with a key padding mask.  A linear layer maps each output token back to 204 numbers, the noise
 estimate of that frame.
 
-One addition of ours, measured in chapter 03: a token is narrower (128) than a frame (204 numbers),
+One addition of ours, measured in the denoiser chapter: a token is narrower (128) than a frame (204 numbers),
 so a plain transformer cannot even pass the noise through at large t (its loss stalls at the
 fraction of dimensions it cannot represent).  We therefore add the closed-form *Gaussian* noise
 estimate of each frame, E[eps | x_t] for frames drawn from N(0, Sigma) with Sigma the covariance
@@ -30,7 +30,7 @@ from .bit import BiT, check_sequence_input
 
 @dataclass(frozen=True)
 class DenoiserConfig:
-    """Sizes of the denoiser (our choice; the paper gives none: see chapter 03 for the CPU budget)."""
+    """Sizes of the denoiser (our choice; the paper gives none: see the denoiser chapter for the CPU budget)."""
 
     num_landmarks: int = 68
     width: int = 128

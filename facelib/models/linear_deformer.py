@@ -1,4 +1,4 @@
-"""The "Linear" baseline of Table 5 (paper §6, after Casas & Otaduy [10]; chapter 09).
+"""The "Linear" baseline of Table 5 (paper §6, after Casas & Otaduy [10]; the mesh-deformation chapter).
 
 An autoencoder whose encoder and decoder are each three layers of "linear, nonlinear, linear"
 units.  As in §6 the decoder, which originally decodes the latent code of the input mesh, is

@@ -8,7 +8,7 @@ x_t = q_sample(x_0, t) with t uniform in 0..T (t = 0 is the clean sequence), so 
 score every intermediate x_t of the reverse process (guided-diffusion's ``--noised`` recipe).
 
 Like the independent classifier, it reads *motion*: the frames of x_t minus their mean over the
-(valid) frames, which removes the anatomy (our choice, chapter 01: with 9 training faces a
+(valid) frames, which removes the anatomy (our choice, the face-world chapter: with 9 training faces a
 classifier of absolute coordinates learns faces, not expressions).
 
 The text head of Alg. 2 (§3.2, "the softmax layer is removed") is the same network with an

@@ -348,12 +348,13 @@ class Motion3DGANRecipe(_BaselineRecipe):
 
     def build(self, generator):
         k, train = self.num_classes, self.train
-        model = motion3dgan.Motion3DGAN(motion3dgan.Motion3DGANConfig(num_classes=k, num_frames=train.landmarks.shape[1]),
-                                        num_neutrals=len(np.unique(train.subjects)))
+        config_ = motion3dgan.Motion3DGANConfig(num_classes=k, num_frames=train.landmarks.shape[1])
+        model = motion3dgan.Motion3DGAN(config_, num_neutrals=len(np.unique(train.subjects)))
         model.reference.copy_(self.reference.float())
         model.tangent_scale.fill_(float(self.real.std()))
         model.arc_length.copy_(torch.stack([self.length[self.labels == y].mean() for y in range(k)]).float())
-        model.e2n_fraction.copy_(torch.as_tensor([np.mean(train.kinds[train.labels == y] == 1) for y in range(k)]).float())
+        e2n = [np.mean(train.kinds[train.labels == y] == 1) for y in range(k)]
+        model.e2n_fraction.copy_(torch.as_tensor(e2n).float())
         model.neutrals.copy_(torch.as_tensor(train.subject_neutrals()))
         self.critic = motion3dgan.Critic(model.config)
         return model
@@ -376,14 +377,15 @@ class Motion3DGANRecipe(_BaselineRecipe):
         u_mix = ((1 - tau) * u_real + tau * u_fake).requires_grad_(True)
         grad = torch.autograd.grad(self.critic(u_mix, onehot).sum(), u_mix, create_graph=True)[0]
         penalty = ((grad.flatten(1).norm(dim=1) - 1) ** 2).mean()
-        loss = self.critic(u_fake, onehot).mean() - self.critic(u_real, onehot).mean() + self.settings.gp_weight * penalty
+        wasserstein = self.critic(u_fake, onehot).mean() - self.critic(u_real, onehot).mean()
+        loss = wasserstein + self.settings.gp_weight * penalty
         return loss, {"critic": loss.item()}
 
     def generator_loss(self, model, draws):
         s, gen = self.settings, draws.generator
         y = self.labels[draws.examples(self.size)]
-        partner = torch.stack([self.by_class[int(c)][torch.randint(0, len(self.by_class[int(c)]), (1,), generator=gen)][0]
-                               for c in y])
+        partner = torch.stack([members[torch.randint(0, len(members), (1,), generator=gen)][0]
+                               for members in (self.by_class[int(c)] for c in y)])
         u_fake = self._fake(model, y, draws)
         loss = (-s.adversarial_weight * self.critic(u_fake, nn.functional.one_hot(y, self.num_classes).float()).mean()
                 + s.reconstruction_weight * (u_fake - self.real[partner] / model.tangent_scale).abs().mean())

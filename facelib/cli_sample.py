@@ -1,0 +1,147 @@
+"""``python -m facelib sample TASK``: one subcommand per task, its options the fields of the task's settings
+(facelib/config.py, whose defaults are the book's best measured settings; ``--paper`` the paper's)."""
+from __future__ import annotations
+
+import argparse
+import json
+from dataclasses import asdict, fields, replace
+
+import numpy as np
+
+from . import config, data, inpainting, tasks
+
+TASKS = {"unconditional": "the unconditional DDPM (§3.1)", "label": "label control (Alg. 1)",
+         "text": "text control (Alg. 2)", "decoder": "a text decoder's sequence refined by the DDPM (not in the paper)",
+         "fill": "expression filling (Alg. 3)", "geometry": "geometry-adaptive generation of a given face (Alg. 4)"}
+SETTINGS = config.SAMPLING | {"decoder": config.DecoderThenDiffusion()}
+GUIDES = {"label": "guide_{}_I", "text": "guide_{}_text", "decoder": "motionclip_{}", "geometry": "guide_{}_S"}
+
+
+def _default(task, field):
+    """'default X; --paper: Y' for the help of an option (a field of the task's settings)."""
+    value, paper = (getattr(s, field) for s in (SETTINGS[task], SETTINGS[task].paper()))
+    show = {None: "None"} if field != "steps" else {None: "all T = 2000"}
+    return f"default {show.get(value, value)}; --paper: {show.get(paper, paper)}"
+
+
+def _option(parser, task, field, help, *aliases, **kwargs):
+    """An option that sets a field of the task's settings; its help states the default."""
+    parser.add_argument("--" + field.replace("_", "-"), *aliases, dest=field, default=None,
+                        help=f"{help} ({_default(task, field)})", **kwargs)
+
+
+def add_parsers(sub):
+    common = argparse.ArgumentParser(add_help=False)
+    g = common.add_argument_group("every task")
+    g.add_argument("--out", required=True, help="output .npz (key 'landmarks': (n, F, 68, 3) float32 in mm, "
+                   "and the 'config' that produced it)")
+    g.add_argument("--n", type=int, default=16, help="number of sequences (default 16)")
+    g.add_argument("--checkpoint", default=None, help="denoiser checkpoint (default denoiser_<dataset>)")
+    g.add_argument("--paper", action="store_true", help="the paper's printed algorithm: all T = 2000 steps, no "
+                   "addition of the book (options given explicitly still apply)")
+    p = sub.add_parser("sample", help="generate landmark sequences: sample TASK --out out.npz (see sample TASK --help)")
+    parsers = p.add_subparsers(dest="task", required=True, metavar="TASK")
+    t = {}
+    for task, description in TASKS.items():
+        t[task] = parsers.add_parser(task, parents=[common], help=description, description=description)
+        _option(t[task], task, "steps", "reverse steps, respaced from T = 2000", type=int)
+        _option(t[task], task, "num_frames", "frames per sequence", "--length", type=int)
+        _option(t[task], task, "seed", "the random seed", type=int)
+        _option(t[task], task, "dataset", "the data the networks were trained on", choices=list(data.DATASET_NAMES))
+        t[task].set_defaults(func=run)
+    for task in ("label", "text", "geometry"):
+        _option(t[task], task, "lr", "Adagrad learning rate of the guidance (None: the book's choice for the "
+                "dataset and the number of steps)", type=float)
+        _option(t[task], task, "guidance_weight", "lambda of Alg. 1-2", type=float)
+    for task in ("label", "geometry"):
+        t[task].add_argument("--label", required=True, help="an expression label of the dataset, e.g. high_smile "
+                             "(geometry: or 'mouth_open E2N')")
+    _option(t["label"], "label", "method", "adagrad (Alg. 1) or mean_shift", choices=list(config.GUIDANCE_METHODS))
+    _option(t["label"], "label", "scale", "the mean shift's gradient scale", type=float)
+    for task in ("text", "decoder"):
+        t[task].add_argument("--text", required=True, help='what to show, e.g. "disgust high smile" or "from the '
+                             'neutral face to bareteeth"')
+    _option(t["text"], "text", "score", "what Alg. 2 climbs: the cosine of Eq. 10 or the text head's "
+            "log-probability of the text among the training descriptions", choices=list(config.TEXT_SCORES))
+    _option(t["text"], "text", "head_input", "what the head reads: x_t (Alg. 2) or the denoiser's estimate x0_hat",
+            choices=list(config.HEAD_INPUTS))
+    _option(t["text"], "text", "vocabulary", "with --score contrastive: match the text against every description "
+            "known, also those no network has seen", action="store_const", const=True)
+    _option(t["text"], "text", "particles", "best-of-K: K guided chains per sequence, the head keeps one at the "
+            "time label --select-time", type=int)
+    _option(t["text"], "text", "select_time", "the time label where best-of-K picks", type=float)
+    _option(t["text"], "text", "max_time", "leave the steps above this time label unguided", type=float)
+    _option(t["decoder"], "decoder", "start", "the step of the paper's chain the decoder's sequence is re-noised "
+            "to", type=int)
+    t["fill"].add_argument("--input", required=True, help=".npz whose 'landmarks' (F, 68, 3) or (n, F, 68, 3) holds "
+                           "the sequence(s) to complete")
+    t["fill"].add_argument("--known", required=True, help="known frames as 0-based ranges, e.g. 0:10,30:40")
+    t["geometry"].add_argument("--neutral", required=True, help=".npz with the neutral landmarks (68, 3) in mm (key "
+                               "'neutral' or 'landmarks')")
+    _option(t["geometry"], "geometry", "order", "neutral face first (N2E) or last (E2N)", choices=list(data.KIND_NAMES))
+    _option(t["geometry"], "geometry", "passes", "harmonising passes of Alg. 4", type=int)
+    for task in ("fill", "geometry"):
+        _option(t[task], task, "reconstruction_scale", "reconstruction guidance zeta (0: none)", type=float)
+        _option(t[task], task, "resample", "RePaint's resampling r (1: none)", type=int)
+
+
+def read_npz_array(path, keys, what):
+    """The first of ``keys`` found in an .npz (a clear error naming the file and the keys otherwise)."""
+    try:
+        with np.load(path) as f:
+            for key in keys:
+                if key in f:
+                    return np.asarray(f[key], dtype=np.float64)
+            found = list(f.keys())
+    except (OSError, ValueError) as e:
+        raise ValueError(f"cannot read {what} from {path}: {e}") from None
+    raise ValueError(f"{path} has no {' or '.join(repr(k) for k in keys)} array ({what}); it has {found}")
+
+
+def settings_of(args):
+    """The task's settings: its defaults (``--paper``: the paper's) with the options given, the guidance
+    rates and weights resolved to the values the run will use."""
+    base = SETTINGS[args.task].paper() if args.paper else SETTINGS[args.task]
+    settings = replace(base, **{f.name: getattr(args, f.name) for f in fields(base)
+                                if getattr(args, f.name, None) is not None})
+    if args.task == "label" and settings.lr is None:
+        settings = replace(settings, lr=tasks.adagrad_lr(settings.dataset, settings.steps))
+    if args.task == "text" and settings.guidance_weight is None:
+        settings = replace(settings, guidance_weight=tasks.text_guidance_weight(settings.score))
+    if args.task == "text" and settings.lr is None:
+        settings = replace(settings, lr=tasks.text_lr(settings.steps, score=settings.score))
+    return settings
+
+
+def run(args):
+    settings = settings_of(args)
+    checkpoint = args.checkpoint or f"denoiser_{settings.dataset}"
+    denoiser = tasks.load_denoiser(checkpoint)
+    n, extra = args.n, {}
+    if args.task == "unconditional":
+        landmarks = tasks.unconditional(n, settings, denoiser)
+    elif args.task == "label":
+        landmarks, extra["labels"] = tasks.label_control(args.label, n, settings, denoiser), [args.label] * n
+    elif args.task == "text":
+        landmarks, extra["texts"] = tasks.text_control(args.text, n, settings, denoiser), [args.text] * n
+    elif args.task == "decoder":
+        landmarks, extra["texts"] = tasks.decoder_then_diffusion(args.text, n, settings, denoiser), [args.text] * n
+    elif args.task == "fill":
+        given = read_npz_array(args.input, ["landmarks"], "the sequence to fill")
+        if given.ndim not in (3, 4) or given.shape[-2:] != (68, 3):
+            raise ValueError(f"{args.input}: 'landmarks' must be (F, 68, 3) or (n, F, 68, 3) in mm, got {given.shape}")
+        extra["known"] = inpainting.parse_known(args.known, given.shape[-3])
+        landmarks = tasks.fill(given, extra["known"], settings, denoiser)
+    else:
+        neutral = read_npz_array(args.neutral, ["neutral", "landmarks"], "the neutral landmarks")
+        extra["labels"] = [tasks.order_sensitive_label(args.label, settings.order)] * n
+        landmarks = tasks.geometry_adaptive(neutral, extra["labels"], n, settings, denoiser)
+    used = {"task": args.task, "paper": args.paper, "n": len(landmarks), "checkpoint": checkpoint,
+            "checkpoint_sha256": denoiser.meta["sha256"],
+            "guidance": GUIDES.get(args.task, "").format(settings.dataset),
+            "adagrad_steps": config.ADAGRAD_STEPS, **asdict(settings),
+            **{k: getattr(args, k) for k in ("label", "text", "input", "known", "neutral") if hasattr(args, k)}}
+    np.savez(args.out, landmarks=landmarks.astype(np.float32), config=json.dumps(used),
+             **{k: np.asarray(v) for k, v in extra.items()})
+    print(f"wrote {args.out}: landmarks {landmarks.shape} float32 (mm); config {used}")
+    return 0

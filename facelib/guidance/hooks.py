@@ -1,0 +1,198 @@
+"""Guiding the reverse process of the unconditional DDPM (paper §3.2, App. C Alg. 1, 2 and 4): sampler hooks.
+
+The model is never changed: guidance is a hook ``guide(x_hat, xt, t, out)`` handed to
+:meth:`GaussianDiffusion.p_sample`, which receives the unguided sample x_hat_{t-1} ~ p_theta(. | x_t)
+(Alg. 1 lines 3-8), the chain's step t and the model's mean and variance ``out``, and returns the
+x_{t-1} to continue with.  Hooks speak in the chain's steps only; the scores they climb
+(facelib/guidance/scores.py) are made for the chain when the hook is built.
+
+* :class:`OptimisationGuidance`, the paper's choice (after Diffusion-LM [51]):
+      x_{t-1} = argmax_x [ lambda log p_theta(x | x_t) + score(x, t-1) ]       (Alg. 1 line 10)
+  approximated by a few Adagrad steps started from x_hat_{t-1}.  With sigma_t^2 the variance of
+  p_theta, lambda log p_theta(x | x_t) = -lambda ||x - mu||^2 / (2 sigma_t^2) + const: a spring that
+  holds x near the model's mean, stiffer at small t.
+* :class:`MeanShiftGuidance`, the classic classifier guidance (Sohl-Dickstein et al.; Dhariwal
+  & Nichol 2021, Alg. 1): x_{t-1} ~ N(mu + s sigma_t^2 grad_{x_t} log p_phi(y | x_t, t), sigma_t^2 I).
+  Paper §3.2 writes the shift with grad p_phi; the correct form has grad log p_phi.
+* :class:`ReconstructionGuidance` (not in the paper; Ho et al. 2022, "video diffusion models", with
+  the normalised step of Chung et al. 2023, DPS): pull x_{t-1} along -grad_{x_t} ||x_0_hat(x_t)|S_K -
+  x_0|S_K||, so that the *unknown* frames agree with known ones (the remedy for Alg. 3 and 4's seams).
+* :class:`BestOfK` (not in the paper): K guided chains per sequence; at a chosen step the one the score
+  rates highest continues alone, a one-step particle filter.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import torch
+
+from ..config import ADAGRAD_STEPS, GUIDANCE_WEIGHT
+from ..diffusion import GaussianDiffusion
+
+
+def _for_chain(score, diffusion):
+    """The score made for the chain's steps (a plain function is used as it is)."""
+    return score.for_chain(diffusion) if hasattr(score, "for_chain") else score
+
+
+def steps_of(t, x):
+    """The chain's step t as a (B,) float tensor for the batch x (what scores and networks are given)."""
+    return torch.full((len(x),), float(t), device=x.device)
+
+
+def log_p_theta(x, out):
+    """log p_theta(x | x_t) = log N(x; mu_theta(x_t, t), sigma_t^2 I) + const, per sequence (B,)."""
+    return -((x - out["mean"]) ** 2 / (2 * out["variance"])).flatten(1).sum(1)
+
+
+def gradient_at(xt, fn):
+    """grad_x sum(fn(x)) at x = x_t (fn returns one value per sequence), with gradients enabled
+    even inside the sampler's no-grad loop."""
+    with torch.enable_grad():
+        x = xt.detach().clone().requires_grad_(True)
+        return torch.autograd.grad(fn(x).sum(), x)[0]
+
+
+def _check_positive(name, value, allow_zero=False):
+    if (not isinstance(value, (int, float)) or isinstance(value, bool) or value != value or value < 0
+            or (value == 0 and not allow_zero)):
+        raise ValueError(f"{name} must be a {'non-negative' if allow_zero else 'positive'} number, got {value!r}")
+
+
+@dataclass
+class OptimisationGuidance:
+    """Alg. 1 line 10: ``num_steps`` Adagrad steps (a fresh optimiser at every diffusion step)
+    maximising guidance_weight * log p_theta(x | x_t) + score(x, t-1), started from x_hat_{t-1}.
+
+    max_time (not in the paper): leave the steps whose time label t is above it unguided, where the
+    guide reads nothing but noise (None: guide every step, as Alg. 1 and 2 do)."""
+
+    score: Callable
+    diffusion: GaussianDiffusion
+    guidance_weight: float = GUIDANCE_WEIGHT
+    lr: float = 0.01
+    num_steps: int = ADAGRAD_STEPS
+    max_time: float | None = None
+
+    def __post_init__(self):
+        _check_positive("guidance_weight (lambda)", self.guidance_weight, allow_zero=True)
+        _check_positive("the Adagrad learning rate", self.lr)
+        if not isinstance(self.num_steps, int) or self.num_steps < 1:
+            raise ValueError(f"num_steps must be a positive integer, got {self.num_steps!r}")
+        if self.max_time is not None:
+            _check_positive("max_time", self.max_time)
+        self.score = _for_chain(self.score, self.diffusion)
+
+    def objective(self, x, out, t_prev):
+        """lambda log p_theta(x | x_t) + score(x, t-1), per sequence (B,)."""
+        return self.guidance_weight * log_p_theta(x, out) + self.score(x, t_prev)
+
+    def __call__(self, x_hat, xt, t, out):
+        if self.max_time is not None and float(self.diffusion.timesteps[t]) > self.max_time:
+            return x_hat
+        t_prev = steps_of(t - 1, x_hat)
+        x = x_hat.detach().clone().requires_grad_(True)
+        opt = torch.optim.Adagrad([x], lr=self.lr)
+        with torch.enable_grad():
+            for _ in range(self.num_steps):
+                loss = -self.objective(x, out, t_prev).sum()
+                opt.zero_grad()
+                loss.backward()
+                opt.step()
+        return x.detach()
+
+
+@dataclass
+class MeanShiftGuidance:
+    """Classic classifier guidance: shift the sample by scale * sigma_t^2 * grad_{x_t} score(x_t, t)."""
+
+    score: Callable
+    diffusion: GaussianDiffusion
+    scale: float = 1.0
+
+    def __post_init__(self):
+        _check_positive("scale", self.scale, allow_zero=True)
+        self.score = _for_chain(self.score, self.diffusion)
+
+    def __call__(self, x_hat, xt, t, out):
+        grad = gradient_at(xt, lambda x: self.score(x, steps_of(t, x)))
+        return x_hat + self.scale * out["variance"] * grad
+
+
+@dataclass
+class ReconstructionGuidance:
+    """x_{t-1} = x_hat_{t-1} - scale * grad_{x_t} ||x0_hat(x_t)|S_K - x_0|S_K||  (per sequence).
+
+    x0_hat(x_t) = (x_t - sqrt(1 - abar_t) eps_theta(x_t, t)) / sqrt(abar_t) is the model's estimate of
+    the clean sequence (Eq. 6 inverted); its known frames should equal the given ones.  Replacing
+    the known frames (Alg. 3) tells the model nothing about how the unknown frames must change to
+    fit them; this gradient does, through the denoiser.  The norm (not its square) makes the step
+    size independent of how far off the estimate is (DPS).  Costs one backward pass per step.
+    """
+
+    model: torch.nn.Module
+    diffusion: GaussianDiffusion
+    x0: torch.Tensor  # (B, F, 68, 3), normalised; only the known frames are read
+    known: torch.Tensor  # (B, F) bool
+    scale: float = 1.0
+
+    def __post_init__(self):
+        _check_positive("the reconstruction guidance scale", self.scale, allow_zero=True)
+        self.model = self.diffusion.wrap(self.model)
+
+    def known_error(self, x, t):
+        """||x0_hat(x)|S_K - x_0|S_K|| per sequence (B,)."""
+        eps = self.model(x, t)
+        return (((self.diffusion.predict_x0(x, t, eps) - self.x0) ** 2).sum((2, 3)) * self.known).sum(1).sqrt()
+
+    def __call__(self, x_hat, xt, t, out):
+        return x_hat - self.scale * gradient_at(xt, lambda x: self.known_error(x, t))
+
+
+def best_particles(x, score, t, particles):
+    """Of ``particles`` candidates of each of n sequences, particle-major ((particles * n, ...): candidate j
+    of sequence i at j * n + i), for each sequence the one with the highest score(x, t) (B,): (n, ...)."""
+    if isinstance(particles, bool) or not isinstance(particles, int) or particles < 1 or len(x) % particles:
+        raise ValueError(f"particles must be a positive integer dividing the batch {len(x)}, got {particles!r}")
+    n = len(x) // particles
+    with torch.no_grad():
+        s = score(x, t).reshape(particles, n)
+    if not torch.isfinite(s).all():
+        raise ValueError("the score of a particle is not finite")
+    return x.reshape(particles, n, *x.shape[1:])[s.argmax(0), torch.arange(n)]
+
+
+@dataclass
+class BestOfK:
+    """Best-of-K around any guided chain (not in the paper): ``particles`` chains per sequence run down to
+    the chain's step ``select_step``; there, for each sequence, the chain that ``score`` rates highest
+    continues alone on the rest of the same random stream.  A one-step form of sequential Monte Carlo
+    (particle filtering) with the score as the potential: chains are picked where the score can read what
+    they are committing to.  About K times the cost above select_step."""
+
+    score: Callable
+    particles: int
+    select_step: int
+
+    def sample(self, diffusion, model, shape, guide=None, seed=0, progress=True):
+        """n = shape[0] sequences from the chain ``diffusion`` with the hook ``guide`` (any batch size)."""
+        if not 1 <= self.select_step < diffusion.num_steps:
+            raise ValueError(f"the selection step must be in 1..{diffusion.num_steps - 1} (below the chain's "
+                             f"first step), got {self.select_step}")
+        generator = torch.Generator().manual_seed(seed)
+        x = torch.randn((self.particles * shape[0], *shape[1:]), generator=generator)
+        x = diffusion.run(model, x, generator, diffusion.schedule(end=self.select_step), guide, progress=progress)
+        x = best_particles(x, _for_chain(self.score, diffusion), steps_of(self.select_step, x), self.particles)
+        return diffusion.run(model, x, generator, diffusion.schedule(self.select_step), guide, progress=progress)
+
+
+def chain(*guides):
+    """One sampler hook that applies several guidance hooks in turn (None entries are skipped)."""
+    guides = [g for g in guides if g is not None]
+
+    def guide(x_hat, xt, t, out):
+        for g in guides:
+            x_hat = g(x_hat, xt, t, out)
+        return x_hat
+    return guide

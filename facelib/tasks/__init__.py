@@ -1,0 +1,26 @@
+"""The paper's sampling tasks (§3.2, App. C), one module each, all on one unconditional DDPM: it is never
+retrained, only its reverse process is guided.
+
+* ``unconditional``  §3.1                    * ``label``     label control, Alg. 1
+* ``text``           text control, Alg. 2    * ``decoder``   a text decoder's sequence refined by the DDPM
+* ``fill``           expression filling, Alg. 3
+* ``geometry``       geometry-adaptive generation, Alg. 4
+* ``loading``        the trained denoiser and guidance networks they sample with
+
+Every task is called as ``task(what, n, settings, models..., progress, **overrides)``: ``settings`` is the
+task's frozen dataclass in facelib/config.py (the book's recommended values; ``.paper()`` the paper's
+printed algorithm, ``.fast()`` a few steps) and ``overrides`` change single fields, e.g.
+``tasks.label_control("high_smile", 16, steps=100)``.
+"""
+from .decoder import decoder_then_diffusion
+from .fill import fill
+from .geometry import geometry_adaptive, geometry_passes, order_sensitive_label
+from .label import adagrad_lr, label_control, step_scaled_lr
+from .loading import TrainedDenoiser, TrainedGuide, check_same_space, load_denoiser, load_guide, load_text_head
+from .text import text_control, text_guidance_weight, text_lr, text_score
+from .unconditional import unconditional
+
+__all__ = ["decoder_then_diffusion", "fill", "geometry_adaptive", "geometry_passes", "order_sensitive_label",
+           "adagrad_lr", "label_control", "step_scaled_lr", "TrainedDenoiser", "TrainedGuide", "check_same_space",
+           "load_denoiser", "load_guide", "load_text_head", "text_control", "text_guidance_weight", "text_lr",
+           "text_score", "unconditional"]

@@ -1,0 +1,53 @@
+"""Label control (§3.2, Alg. 1): the unconditional DDPM guided by a noisy classifier p_phi(y | x_t, t)."""
+from __future__ import annotations
+
+from ..config import ADAGRAD_LR, LR_REFERENCE_STEPS, LabelControl
+from ..guidance import ClassifierScore, MeanShiftGuidance, OptimisationGuidance
+from .loading import guided_chain, load_guide, task_settings
+
+
+def step_scaled_lr(rate, reference_steps, steps=None, num_steps=2000, power=0.5):
+    """An Adagrad rate chosen for a chain of ``reference_steps`` reverse steps, for a chain of ``steps``
+    (None: T = ``num_steps``): scaled by (reference_steps / steps) ** power, so that the guidance moves a
+    sample about as far over the whole chain whatever its length (our choice).
+
+    power 0.5: the guided displacements of successive steps add up like a random walk, as the square
+    root of the number of steps (label control; benchmarks/label_control.py measures it at T = 2000,
+    where the unscaled rate overshoots).  power 1: they add up like a drift, linearly (text control:
+    benchmarks/text_control.py measures that the square root still overshoots at T = 2000)."""
+    return rate * float((reference_steps / (steps or num_steps)) ** power)
+
+
+def adagrad_lr(dataset, steps=None, num_steps=2000):
+    """The default Adagrad rate of label control (Alg. 1) for a chain of ``steps`` reverse steps
+    (None: T): ADAGRAD_LR[dataset], chosen at LR_REFERENCE_STEPS, through :func:`step_scaled_lr`."""
+    if dataset not in ADAGRAD_LR:
+        raise ValueError(f"no default Adagrad learning rate for dataset {dataset!r} (defaults for "
+                         f"{', '.join(ADAGRAD_LR)}): pass lr=")
+    return step_scaled_lr(ADAGRAD_LR[dataset], LR_REFERENCE_STEPS, steps, num_steps)
+
+
+def label_control(label, n=16, settings=LabelControl(), denoiser=None, guide=None, progress=True, callback=None,
+                  **overrides):
+    """Label control (Alg. 1): n sequences (n, F, 68, 3) float32 in mm showing ``label``.
+
+    label: a label name of the dataset (e.g. "high_smile"), or a list of n names (one per sequence).
+    settings: :class:`facelib.config.LabelControl`, the method ("adagrad": Alg. 1's 3 Adagrad steps on
+    lambda log p_theta + log p_phi; "mean_shift": classic classifier guidance), lambda, the rate (None:
+    :func:`adagrad_lr`), the steps (None: the paper's T = 2000); ``overrides`` change single fields."""
+    settings, shape = task_settings(settings, overrides, n)
+    labels = [label] * n if isinstance(label, str) else list(label)
+    if len(labels) != n or not all(isinstance(y, str) for y in labels):
+        raise ValueError(f"label must be a label name or a list of n={n} label names, got {label!r}")
+    guide = guide or load_guide(settings.dataset, settings.classifier_type)
+    score = ClassifierScore(guide.model, guide.class_indices(labels))
+    denoiser, diffusion = guided_chain(guide, denoiser, settings.steps)
+    if settings.method == "adagrad":
+        lr = settings.lr
+        if lr is None:
+            lr = adagrad_lr(guide.dataset, settings.steps, guide.meta["training"]["num_diffusion_steps"])
+        hook = OptimisationGuidance(score, diffusion, settings.guidance_weight, lr)
+    else:
+        hook = MeanShiftGuidance(score, diffusion, settings.scale)
+    x = diffusion.sample(denoiser.model, shape, seed=settings.seed, guide=hook, progress=progress, callback=callback)
+    return denoiser.normalizer.denormalize(x.detach()).numpy()

@@ -1,0 +1,117 @@
+"""Loading what the tasks sample with: a trained denoiser with its normaliser and diffusion, and the
+guidance networks (classifiers of Alg. 1 and 4, the text head of Alg. 2), each checked against its data."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import data
+from ..checkpoints import load_checkpoint
+from ..config import TEXT_DATASET, with_overrides
+from ..data import LandmarkNormalizer
+from ..diffusion import GaussianDiffusion, named_betas
+from ..face.sequences import check_num_frames
+from ..models.denoiser import Denoiser, DenoiserConfig
+from ..models.noisy_classifier import NoisyClassifier, NoisyClassifierConfig, NoisyTextHead, TextHeadConfig
+from ..text import EMBEDDING_DIM, MODEL_NAME
+
+
+@dataclass
+class TrainedDenoiser:
+    """A trained eps_theta with everything needed to sample from it."""
+
+    model: Denoiser
+    normalizer: LandmarkNormalizer
+    diffusion: GaussianDiffusion
+    meta: dict
+
+    def diffusion_with(self, steps=None):
+        """The full T-step diffusion (steps=None) or a respaced one with ``steps`` steps."""
+        return self.diffusion if steps is None or steps == self.diffusion.num_steps else self.diffusion.respace(steps)
+
+
+def load_denoiser(name="denoiser_coma", variance="beta"):
+    """Load a shipped (or retrained) denoiser checkpoint from data/checkpoints (sha256 checked)."""
+    model, meta = load_checkpoint(name, "denoiser", lambda c: Denoiser(DenoiserConfig(**c)))
+    training = meta["training"]
+    diffusion = GaussianDiffusion(named_betas(training["schedule"], training["num_diffusion_steps"]), variance)
+    return TrainedDenoiser(model, LandmarkNormalizer.from_dict(meta["normalizer"]), diffusion, meta)
+
+
+def check_n(n, name="n"):
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+        raise ValueError(f"{name} must be a positive integer, got {n!r}")
+
+
+@dataclass
+class TrainedGuide:
+    """A guidance network with its dataset, type and class names: the classifier p_phi(y | x_t, t)
+    of Alg. 1 (type "I" or "S") or the text head BiT(x_t, t) of Alg. 2 (type "text"; its class
+    names are the labels whose descriptions it was trained on)."""
+
+    model: NoisyClassifier
+    dataset: str
+    classifier_type: str
+    class_names: tuple
+    normalizer: LandmarkNormalizer
+    meta: dict
+
+    def class_indices(self, labels):
+        """Class indices of label names (a clear error listing the valid ones)."""
+        bad = [y for y in labels if y not in self.class_names]
+        if bad:
+            raise ValueError(f"unknown label {bad[0]!r} for dataset {self.dataset!r}; "
+                             f"allowed: {', '.join(self.class_names)}")
+        return [self.class_names.index(y) for y in labels]
+
+
+def load_guide(dataset="coma", classifier_type="I", name=None):
+    """Load the shipped guidance classifier guide_<dataset>_<type> (sha256 and classes checked)."""
+    data.check_dataset_name(dataset)
+    data.check_classifier_type(classifier_type)
+    name = name or f"guide_{dataset}_{classifier_type}"
+    model, meta = load_checkpoint(name, "guide", lambda c: NoisyClassifier(NoisyClassifierConfig(**c)))
+    names = data.check_class_names(meta["class_names"], dataset, classifier_type, name)
+    if meta["training"]["dataset"] != dataset:
+        raise ValueError(f"checkpoint {name} was trained on {meta['training']['dataset']!r}, not {dataset!r}")
+    return TrainedGuide(model, dataset, classifier_type, names, LandmarkNormalizer.from_dict(meta["normalizer"]), meta)
+
+
+def load_text_head(dataset=TEXT_DATASET, name=None):
+    """Load the shipped text head guide_<dataset>_text (sha256, labels and text encoder checked)."""
+    data.check_dataset_name(dataset)
+    name = name or f"guide_{dataset}_text"
+    model, meta = load_checkpoint(name, "text_head", lambda c: NoisyTextHead(TextHeadConfig(**c)))
+    names = data.check_class_names(meta["class_names"], dataset, "I", name)
+    if meta["training"]["dataset"] != dataset:
+        raise ValueError(f"checkpoint {name} was trained on {meta['training']['dataset']!r}, not {dataset!r}")
+    if meta.get("text_encoder") != MODEL_NAME or model.config.embedding_dim != EMBEDDING_DIM:
+        raise ValueError(f"checkpoint {name} was trained with the text encoder {meta.get('text_encoder')!r} "
+                         f"({model.config.embedding_dim}-d), not {MODEL_NAME!r} ({EMBEDDING_DIM}-d)")
+    return TrainedGuide(model, dataset, "text", names, LandmarkNormalizer.from_dict(meta["normalizer"]), meta)
+
+
+def check_same_space(denoiser, guide):
+    """The classifier must read x_t in the denoiser's normalised space and on its schedule."""
+    a, b = denoiser.normalizer, guide.normalizer
+    if abs(a.scale - b.scale) > 1e-6 * a.scale or not np.allclose(a.mean_shape, b.mean_shape, atol=1e-4):
+        raise ValueError(f"guidance classifier ({guide.dataset}) and denoiser ({denoiser.meta['training']['dataset']}) "
+                         "normalise landmarks differently: train them on the same dataset")
+    if guide.meta["training"]["num_diffusion_steps"] != denoiser.diffusion.num_steps:
+        raise ValueError("guidance classifier and denoiser use different diffusion schedules")
+
+
+def guided_chain(guide, denoiser, steps):
+    """The denoiser of the guide's dataset (or the given one, checked to share the guide's space) and its
+    chain of ``steps`` steps."""
+    denoiser = denoiser or load_denoiser(f"denoiser_{guide.dataset}")
+    check_same_space(denoiser, guide)
+    return denoiser, denoiser.diffusion_with(steps)
+
+
+def task_settings(settings, overrides, n):
+    """The settings of a call (its defaults with the overrides given) and its checked shape (n, F, 68, 3)."""
+    settings = with_overrides(settings, overrides)
+    check_n(n)
+    return settings, (n, check_num_frames(settings.num_frames), 68, 3)
