@@ -48,6 +48,8 @@ def add_parsers(sub):
         _option(t[task], task, "num_frames", "frames per sequence", "--length", type=int)
         _option(t[task], task, "seed", "the random seed", type=int)
         _option(t[task], task, "dataset", "the data the networks were trained on", choices=list(data.DATASET_NAMES))
+        _option(t[task], task, "variance", "the sampler's sigma_t^2: beta_t (the paper's) or the posterior beta~_t",
+                choices=["beta", "posterior"])
         t[task].set_defaults(func=run)
     for task in ("label", "text", "geometry"):
         _option(t[task], task, "lr", "Adagrad learning rate of the guidance (None: the book's choice for the "

@@ -1,9 +1,12 @@
-"""The generative baselines of Table 1: SRVF geometry (Motion3DGAN) and the shipped generators."""
+"""The related papers' baselines: SRVF geometry (Motion3DGAN) and the generators of Table 1, the BiLSTM filler of
+Table 3 (Berson et al.) and the MotionCLIP-style decoder of Table 2."""
 import numpy as np
 import pytest
 import torch
 
-from facelib import baselines, srvf, training
+from facelib import baselines, evaluation, inpainting, metrics, srvf, training
+from facelib.models.lstm_filler import masked_l1
+from facelib.training.recipes import random_masks
 
 
 def test_srvf_round_trip_and_unit_norm(coma_train):
@@ -64,9 +67,39 @@ def test_temporal_smoothing_keeps_straight_motions_and_removes_jitter():
 
 
 def test_shipped_actor_follows_the_requested_label():
-    from facelib import evaluation
     ev = evaluation.load_evaluator("coma")
     labels = [y for y in ev.class_names for _ in range(10)]
     x = baselines.generate(baselines.load_baseline("actor", "coma"), labels, seed=1)
     accuracy = ev.score(x, [ev.class_index(y) for y in labels])["accuracy"]
     assert accuracy > 2 * 100 / len(ev.class_names)  # well above chance (the book reports the value)
+
+
+def test_masked_l1_is_berson_eq_1_and_training_masks_mix_layouts():
+    pred, target = torch.zeros(1, 4, 68, 3), torch.ones(1, 4, 68, 3)
+    target[:, 2:] = 3.0
+    known = torch.tensor([[True, True, False, False]])
+    assert masked_l1(pred, target, known, alpha_gt=10.0).item() == pytest.approx(10 * 1.0 + 3.0)
+    masks = random_masks(400, 40, torch.Generator().manual_seed(0))
+    assert masks.shape == (400, 40) and masks.any(1).all() and (~masks).any(1).all()
+    assert len({tuple(m.tolist()) for m in masks}) > 100
+
+
+def test_lstm_filler_keeps_known_frames(coma_test):
+    known = inpainting.fill_masks("FFE", 4, 40, seed=0)
+    out = baselines.lstm_fill(coma_test.landmarks[:4], known)
+    assert out.shape == (4, 40, 68, 3) and np.isfinite(out).all()
+    assert np.array_equal(out[known], coma_test.landmarks[:4][known])
+    # it does better than holding the last known frame on the missing ones
+    hold = inpainting.linear_interpolation(coma_test.landmarks[:4], known)
+    assert metrics.missing_frame_error(out, coma_test.landmarks[:4], known) < 2 * metrics.missing_frame_error(
+        hold, coma_test.landmarks[:4], known)
+
+
+def test_motionclip_baseline_is_deterministic():
+    model = baselines.load_baseline("motionclip", "coma+bu")
+    a = baselines.generate_from_text(model, ["disgust high smile", "sad"])
+    b = baselines.generate_from_text(model, ["disgust high smile", "sad"])
+    assert a.shape == (2, 40, 68, 3) and a.dtype == np.float32 and np.array_equal(a, b)
+    assert not np.allclose(a[0], a[1])  # the text changes the motion
+    with pytest.raises(ValueError, match="empty"):
+        baselines.generate_from_text(model, [""])

@@ -1,8 +1,11 @@
+"""The synthetic datasets: shapes, splits, caches and fingerprints, the merged set of text control, the
+landmark normaliser."""
 import json
 import warnings
 
 import numpy as np
 import pytest
+import torch
 
 from facelib import config, data
 from facelib.face import get_template
@@ -141,3 +144,35 @@ def test_composed_performances_show_the_action_units_of_both_labels():
             data.composed_performances(bu, labels)
     with pytest.raises(ValueError, match="kind must be one of"):
         data.composed_performances(bu, "happy", kind="apex")
+
+
+def test_merged_dataset_keeps_every_sequence_face_label_and_split():
+    for split in ("train", "test"):
+        merged = data.load_dataset("coma+bu", split)
+        coma, bu = data.load_dataset("coma", split), data.load_dataset("bu", split)
+        assert len(merged) == len(coma) + len(bu) and merged.label_names == coma.label_names + bu.label_names
+        assert len(merged.label_names) == 18
+        np.testing.assert_array_equal(merged.landmarks[len(coma):], bu.landmarks)
+        assert [merged.label_of(len(coma) + i) for i in (0, 7)] == [bu.label_of(0), bu.label_of(7)]
+        # a BU subject keeps its own face: subject ids are offset by CoMA's 12 subjects
+        i = len(coma) + 5
+        np.testing.assert_array_equal(merged.neutral_landmarks(int(merged.subjects[i])),
+                                      bu.neutral_landmarks(int(bu.subjects[5])))
+    train, test = data.load_dataset("coma+bu", "train"), data.load_dataset("coma+bu", "test")
+    assert not set(train.subjects) & set(test.subjects)  # held-out subjects stay held out
+    assert set(test.subjects) == set(test.extra["test_subjects"])
+    with pytest.raises(ValueError, match="not generated but merged"):
+        data.build("coma+bu")
+    with pytest.raises(ValueError, match="allowed: coma, bu, coma\\+bu"):
+        data.load_dataset("coma+bu4d")
+
+
+def test_normalizer_is_invertible(coma_train):
+    norm = data.LandmarkNormalizer.fit(coma_train)
+    z = norm.normalize(coma_train.landmarks[:10])
+    assert abs(float(norm.normalize(coma_train.landmarks).std()) - 1) < 0.05
+    np.testing.assert_allclose(norm.denormalize(z), coma_train.landmarks[:10], atol=1e-4)
+    zt = norm.normalize(torch.as_tensor(coma_train.landmarks[:10]))
+    np.testing.assert_allclose(norm.denormalize(zt).numpy(), coma_train.landmarks[:10], atol=1e-4)
+    again = data.LandmarkNormalizer.from_dict(json.loads(json.dumps(norm.to_dict())))
+    np.testing.assert_allclose(again.normalize(coma_train.landmarks[:2]), norm.normalize(coma_train.landmarks[:2]))

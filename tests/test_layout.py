@@ -1,4 +1,5 @@
-"""The package's layout: every import points down the map of facelib/__init__.py (facelib.LAYERS), and none hides in a function."""
+"""The package's layout: every import points down the map of facelib/__init__.py (facelib.LAYERS), and none
+hides in a function."""
 import ast
 from pathlib import Path
 
@@ -26,7 +27,8 @@ def _imports():
         for node in ast.walk(tree):
             if isinstance(node, ast.ImportFrom) and node.level:
                 base = package.split(".")[:len(package.split(".")) - node.level + 1]
-                targets = [".".join(base + [node.module])] if node.module else [".".join(base + [a.name]) for a in node.names]
+                names = [node.module] if node.module else [a.name for a in node.names]
+                targets = [".".join(base + [name]) for name in names]
             elif isinstance(node, ast.ImportFrom) and (node.module or "").startswith("facelib"):
                 targets = [node.module]
             elif isinstance(node, ast.Import):

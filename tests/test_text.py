@@ -1,10 +1,10 @@
-"""The offline text encoder of text control (Alg. 2): real embeddings, caching, clear errors."""
+"""Text (Alg. 2): the offline encoder (real embeddings, caching, clear errors) and the descriptions."""
 import hashlib
 
 import numpy as np
 import pytest
 
-from facelib import text
+from facelib import descriptions, text
 
 
 @pytest.fixture(scope="module")
@@ -119,3 +119,13 @@ def test_held_out_paraphrases_are_closer_to_their_label_than_to_others(encoder):
     hits = [int(np.argmax(centroids @ encoder.encode(p)) == i) for i, y in enumerate(ALL_LABELS)
             for p in descriptions.phrasings(y, "held_out")]
     assert np.mean(hits) > 0.6, np.mean(hits)
+
+
+def test_descriptions_put_the_raw_text_first_and_keep_held_out_apart():
+    train = descriptions.descriptions("high_smile", "N2E")
+    assert train[0] == "high smile" and "from the neutral face to high smile" in train
+    assert "from high smile to the neutral face" in descriptions.descriptions("high_smile", "E2N")
+    held_out = descriptions.descriptions("high_smile", "N2E", "held_out")
+    assert not set(held_out) & set(train)
+    assert all(not set(descriptions.descriptions(y, k, "held_out")) & set(descriptions.descriptions(y, k))
+               for y in descriptions.ALL_LABELS for k in ("N2E", "E2N"))

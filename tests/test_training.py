@@ -3,11 +3,13 @@ import os
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 import torch
 
 from facelib import config, training
 from facelib.__main__ import main
+from facelib.training import Draws, swap_anatomy, training_anatomies
 from facelib.training.loop import TrainingLog, device_for, learning_rate
 
 
@@ -103,3 +105,18 @@ def test_two_processes_under_torchrun_train_the_weights_of_one_process_with_the_
     worst = max((two[k] - one[k]).abs().max().item() for k in one)
     assert worst < 3e-5, f"two processes differ from one by {worst:.2g}"
     assert max((half[k] - one[k]).abs().max().item() for k in one) > 10 * 3e-5
+
+
+def test_anatomy_augmentation_keeps_the_motion_and_swaps_the_neutral_face(coma_train):
+    pool = torch.as_tensor(training_anatomies(("coma", "bu")))
+    assert pool.shape == (9 + 81, 68, 3)
+    x = torch.as_tensor(coma_train.landmarks[:6])
+    own = torch.as_tensor(np.stack([coma_train.neutral_landmarks(int(s)) for s in coma_train.subjects[:6]]))
+    draws = Draws(torch.Generator().manual_seed(0), len(x))
+    assert torch.equal(swap_anatomy(x, own, pool, 0.0, draws), x)
+    swapped = swap_anatomy(x, own, pool, 1.0, draws)
+    shift = swapped - x
+    assert torch.allclose(shift, shift[:, :1].expand_as(shift), atol=1e-4)  # the same offset in every frame
+    new_neutral = own + shift[:, 0]
+    dist = (new_neutral[:, None] - pool[None]).norm(dim=-1).mean(-1).min(1).values
+    assert (dist < 1e-4).all()  # the new neutral face is one of the pool's

@@ -27,7 +27,7 @@ def decoder_then_diffusion(text, n=8, settings=DecoderThenDiffusion(), denoiser=
     if denoiser.meta["training"]["dataset"] != dataset:
         raise ValueError(f"the denoiser was trained on {denoiser.meta['training']['dataset']!r}, the decoder's "
                          f"sequences are of {dataset!r}: use denoiser_{dataset}")
-    diffusion = denoiser.diffusion_with(settings.steps)
+    diffusion = denoiser.diffusion_with(settings.steps, settings.variance)
     last = denoiser.diffusion.num_steps
     if not 1 <= settings.start <= last:
         raise ValueError(f"start must be a step in 1..{last}, got {settings.start!r}")

@@ -26,7 +26,7 @@ def fill(sequences, known, settings=Fill(), denoiser=None, progress=True, callba
     settings = with_overrides(settings, overrides)
     x, mask = check_fill_input(sequences, known)
     denoiser = denoiser or load_denoiser(f"denoiser_{settings.dataset}")
-    diffusion = denoiser.diffusion_with(settings.steps)
+    diffusion = denoiser.diffusion_with(settings.steps, settings.variance)
     x0 = torch.as_tensor(denoiser.normalizer.normalize(x))
     mask_t = torch.as_tensor(mask)
     reconstruction = (ReconstructionGuidance(denoiser.model, diffusion, x0, mask_t, settings.reconstruction_scale)

@@ -67,7 +67,7 @@ def geometry_passes(neutral_landmarks, label, n=1, settings=GeometryAdaptive(), 
     if guide.classifier_type != "S":
         raise ValueError("geometry-adaptive generation needs a type-S guidance classifier (label x N2E/E2N)")
     targets = guide.class_indices(names)
-    denoiser, diffusion = guided_chain(guide, denoiser, settings.steps)
+    denoiser, diffusion = guided_chain(guide, denoiser, settings)
     restart = diffusion.num_steps if settings.renoise_step is None else int(settings.renoise_step)
     if not 1 <= restart <= diffusion.num_steps:
         raise ValueError(f"renoise_step must be in 1..{diffusion.num_steps} (steps of the sampler), got {restart}")

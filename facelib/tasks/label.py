@@ -41,7 +41,7 @@ def label_control(label, n=16, settings=LabelControl(), denoiser=None, guide=Non
         raise ValueError(f"label must be a label name or a list of n={n} label names, got {label!r}")
     guide = guide or load_guide(settings.dataset, settings.classifier_type)
     score = ClassifierScore(guide.model, guide.class_indices(labels))
-    denoiser, diffusion = guided_chain(guide, denoiser, settings.steps)
+    denoiser, diffusion = guided_chain(guide, denoiser, settings)
     if settings.method == "adagrad":
         lr = settings.lr
         if lr is None:

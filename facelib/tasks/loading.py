@@ -26,9 +26,13 @@ class TrainedDenoiser:
     diffusion: GaussianDiffusion
     meta: dict
 
-    def diffusion_with(self, steps=None):
-        """The full T-step diffusion (steps=None) or a respaced one with ``steps`` steps."""
-        return self.diffusion if steps is None or steps == self.diffusion.num_steps else self.diffusion.respace(steps)
+    def diffusion_with(self, steps=None, variance=None):
+        """The full T-step diffusion (steps=None) or a respaced one with ``steps`` steps; ``variance`` ("beta",
+        "posterior") replaces the sampler's sigma_t^2 (None: the denoiser's own)."""
+        diffusion = self.diffusion
+        if variance is not None and variance != diffusion.variance:
+            diffusion = GaussianDiffusion(diffusion.betas[1:], variance)
+        return diffusion if steps is None or steps == diffusion.num_steps else diffusion.respace(steps)
 
 
 def load_denoiser(name="denoiser_coma", variance="beta"):
@@ -102,12 +106,12 @@ def check_same_space(denoiser, guide):
         raise ValueError("guidance classifier and denoiser use different diffusion schedules")
 
 
-def guided_chain(guide, denoiser, steps):
+def guided_chain(guide, denoiser, settings):
     """The denoiser of the guide's dataset (or the given one, checked to share the guide's space) and its
-    chain of ``steps`` steps."""
+    chain for the task's settings (steps, variance)."""
     denoiser = denoiser or load_denoiser(f"denoiser_{guide.dataset}")
     check_same_space(denoiser, guide)
-    return denoiser, denoiser.diffusion_with(steps)
+    return denoiser, denoiser.diffusion_with(settings.steps, settings.variance)
 
 
 def task_settings(settings, overrides, n):

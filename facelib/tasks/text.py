@@ -78,7 +78,7 @@ def text_control(text, n=8, settings=TextControl(), denoiser=None, head=None, pr
     head = head or load_text_head(settings.dataset)
     if head.classifier_type != "text":
         raise ValueError("text control needs a text head (load_text_head), not a label classifier")
-    denoiser, diffusion = guided_chain(head, denoiser, settings.steps)
+    denoiser, diffusion = guided_chain(head, denoiser, settings)
     score = text_score(settings, head, denoiser, embeddings)
     weight = text_guidance_weight(settings.score) if settings.guidance_weight is None else settings.guidance_weight
     lr = settings.lr

@@ -1,25 +1,9 @@
+"""Renders, GIFs and landmark plots."""
 import numpy as np
 import pytest
 
 from facelib import viz
-from facelib.__main__ import main
 from facelib.face import get_template
-
-
-def test_cli_data_prints_a_summary(capsys):
-    assert main(["data", "--name", "coma"]) == 0
-    out = capsys.readouterr().out
-    assert "dataset 'coma': 689 sequences, 12 subjects" in out and "mouth_open" in out
-    assert "fingerprint matches" in out
-
-
-def test_cli_rejects_bad_arguments(capsys):
-    with pytest.raises(SystemExit):
-        main(["data", "--name", "cmoa"])
-    assert "invalid choice: 'cmoa'" in capsys.readouterr().err
-    with pytest.raises(SystemExit):
-        main(["data", "--frames", "1"])
-    assert "num_frames must be in [2, 400]" in capsys.readouterr().err
 
 
 def test_render_face_draws_a_face():

@@ -1,0 +1,170 @@
+"""The command line: python -m facelib data|train|sample TASK|neutral|animate."""
+import json
+
+import numpy as np
+import pytest
+import trimesh
+
+from facelib import __main__ as cli, config, meshio as io, tasks
+from facelib.__main__ import main
+from facelib.face import template as tpl
+
+
+T = tpl.get_template()
+
+
+def test_cli_fill_and_geometry(tmp_path, coma_test, capsys):
+    seq = tmp_path / "seq.npz"
+    np.savez(seq, landmarks=coma_test.landmarks[0])
+    out = tmp_path / "filled.npz"
+    assert main(["sample", "fill", "--input", str(seq), "--known", "0:10,30:40", "--steps", "5",
+                 "--out", str(out)]) == 0
+    with np.load(out) as f:
+        filled, known = f["landmarks"], f["known"]
+    assert filled.shape == (1, 40, 68, 3) and known.sum() == 20
+    assert np.array_equal(filled[0, :10], coma_test.landmarks[0, :10])
+    neutral = tmp_path / "neutral.npz"
+    np.savez(neutral, neutral=coma_test.subject_neutrals()[0])
+    out = tmp_path / "geo.npz"
+    assert main(["sample", "geometry", "--neutral", str(neutral), "--label", "mouth_open", "--n", "2",
+                 "--passes", "1", "--steps", "5", "--out", str(out)]) == 0
+    with np.load(out) as f:
+        assert f["landmarks"].shape == (2, 40, 68, 3) and list(f["labels"]) == ["mouth_open N2E"] * 2
+    with pytest.raises(SystemExit):
+        main(["sample", "fill", "--input", str(seq), "--known", "0:40", "--out", str(out)])
+    assert "no unknown frame" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["sample", "geometry", "--neutral", str(seq), "--label", "mouth_open", "--out", str(out)])
+    assert "(68, 3)" in capsys.readouterr().err
+
+
+def test_cli_label_task_writes_npz(tmp_path):
+    from facelib.__main__ import main
+    out = tmp_path / "smile.npz"
+    assert main(["sample", "label", "--label", "high_smile", "--n", "2", "--steps", "5",
+                 "--out", str(out)]) == 0
+    npz = np.load(out)
+    assert npz["landmarks"].shape == (2, 40, 68, 3) and npz["landmarks"].dtype == np.float32
+    assert list(npz["labels"]) == ["high_smile", "high_smile"]
+    assert '"guidance_weight": 0.01' in str(npz["config"])
+    assert f'"lr": {tasks.adagrad_lr("coma", 5)}' in str(npz["config"])
+    with pytest.raises(SystemExit):
+        main(["sample", "label", "--label", "grin", "--n", "2", "--steps", "5", "--out", str(out)])
+
+
+def test_cli_text_task_writes_npz(tmp_path, capsys):
+    from facelib.__main__ import main
+    out = tmp_path / "text.npz"
+    assert main(["sample", "text", "--text", "disgust high smile", "--n", "2", "--steps", "5",
+                 "--out", str(out)]) == 0
+    npz = np.load(out)
+    assert npz["landmarks"].shape == (2, 40, 68, 3) and list(npz["texts"]) == ["disgust high smile"] * 2
+    used = json.loads(str(npz["config"]))
+    assert used["dataset"] == "coma+bu" and used["guidance"] == "guide_coma+bu_text"
+    assert used["lr"] == pytest.approx(tasks.text_lr(5))
+    assert used["guidance_weight"] == config.TEXT_GUIDANCE_WEIGHT and used["head_input"] == "x_t"
+    assert used["particles"] == 1 and used["max_time"] is None
+    assert main(["sample", "text", "--text", "from sad to the neutral face", "--n", "1", "--steps", "3",
+                 "--head-input", "x0_hat", "--out", str(out)]) == 0
+    assert json.loads(str(np.load(out)["config"]))["head_input"] == "x0_hat"
+    assert main(["sample", "text", "--text", "from sad to the neutral face", "--n", "1", "--steps", "3",
+                 "--score", "contrastive", "--out", str(out)]) == 0
+    used = json.loads(str(np.load(out)["config"]))
+    assert used["score"] == "contrastive" and used["guidance_weight"] == config.CONTRASTIVE_GUIDANCE_WEIGHT
+    assert used["lr"] == pytest.approx(tasks.text_lr(3, score="contrastive"))
+    assert main(["sample", "text", "--text", "from sad to the neutral face", "--n", "2", "--steps", "10",
+                 "--score", "contrastive", "--particles", "3", "--max-time", "1400", "--out", str(out)]) == 0
+    used = json.loads(str(np.load(out)["config"]))
+    assert used["particles"] == 3 and used["select_time"] == config.SELECT_TIME and used["max_time"] == 1400
+    assert np.load(out)["landmarks"].shape == (2, 40, 68, 3)
+    assert used["vocabulary"] is False
+    assert main(["sample", "text", "--text", "beaming", "--n", "1", "--steps", "3", "--score", "contrastive",
+                 "--vocabulary", "--out", str(out)]) == 0
+    assert json.loads(str(np.load(out)["config"]))["vocabulary"] is True
+    with pytest.raises(SystemExit):
+        main(["sample", "text", "--text", "beaming", "--n", "1", "--steps", "3", "--vocabulary",
+              "--out", str(out)])
+    assert "vocabulary is matched by the contrastive score" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["sample", "label", "--label", "happy", "--particles", "2", "--out", str(out)])
+    assert "unrecognized arguments: --particles" in capsys.readouterr().err  # an option of text only
+    assert main(["sample", "decoder", "--text", "from sad to the neutral face", "--n", "2", "--steps", "20",
+                 "--start", "400", "--out", str(out)]) == 0
+    used = json.loads(str(np.load(out)["config"]))
+    assert used["task"] == "decoder" and used["start"] == 400 and used["guidance"] == "motionclip_coma+bu"
+    assert np.load(out)["landmarks"].shape == (2, 40, 68, 3)
+    for extra in (["--lr", "0.1"], ["--head-input", "x0_hat"], ["--score", "contrastive"], ["--particles", "2"],
+                  ["--vocabulary"]):  # options of Alg. 2, which the decoder route does not run
+        with pytest.raises(SystemExit):
+            main(["sample", "decoder", "--text", "sad", "--n", "1", "--steps", "5", *extra, "--out", str(out)])
+        assert "unrecognized arguments" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["sample", "text", "--n", "2", "--out", str(out)])
+
+
+def test_cli_sample_writes_npz(tmp_path):
+    out = tmp_path / "out.npz"
+    assert main(["sample", "unconditional", "--n", "2", "--length", "30", "--steps", "4",
+                 "--out", str(out)]) == 0
+    z = np.load(out)
+    assert z["landmarks"].shape == (2, 30, 68, 3) and z["landmarks"].dtype == np.float32
+    cfg = json.loads(str(z["config"]))
+    assert cfg["steps"] == 4 and cfg["checkpoint"] == "denoiser_coma"
+
+
+def test_cli_train_writes_a_loadable_checkpoint(tmp_path, capsys):
+    stem = tmp_path / "smoke"
+    assert main(["train", "denoiser", "--steps", "3", "--out", str(stem)]) == 0
+    d = tasks.load_denoiser(stem)
+    assert d.meta["training"]["steps"] == 3 and len(d.meta["history"]["loss"]) >= 1
+    assert "wrote" in capsys.readouterr().out
+    with pytest.raises(SystemExit):
+        main(["train", "classifier"])
+
+
+def test_cli_data_prints_a_summary(capsys):
+    assert main(["data", "--name", "coma"]) == 0
+    out = capsys.readouterr().out
+    assert "dataset 'coma': 689 sequences, 12 subjects" in out and "mouth_open" in out
+    assert "fingerprint matches" in out
+
+
+def test_cli_rejects_bad_arguments(capsys):
+    with pytest.raises(SystemExit):
+        main(["data", "--name", "cmoa"])
+    assert "invalid choice: 'cmoa'" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["data", "--frames", "1"])
+    assert "num_frames must be in [2, 400]" in capsys.readouterr().err
+
+
+def test_animate_writes_obj_frames_a_gif_and_the_landmarks(tmp_path, face_obj):
+    out = tmp_path / "anim"
+    assert cli.main(["animate", "--mesh", str(face_obj), "--label", "mouth_open", "--steps", "2",
+                     "--out", str(out)]) == 0
+    objs = sorted(out.glob("frame_*.obj"))
+    assert len(objs) == 40 and (out / "animation.gif").stat().st_size > 1000
+    first, last = (trimesh.load(p, process=False, maintain_order=True) for p in (objs[0], objs[-1]))
+    np.testing.assert_array_equal(first.faces, T.faces)
+    neutral = io.read_neutral_mesh(face_obj)
+    assert np.abs(first.vertices - neutral).max() < 0.5  # N2E: frame 1 is (nearly) the neutral face
+    assert np.abs(last.vertices - neutral).max() > 1.0  # and the face moves
+    with np.load(out / "landmarks.npz") as f:
+        assert f["landmarks"].shape == (1, 40, 68, 3)
+        assert json.loads(str(f["config"]))["label"] == "mouth_open"
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--label", "wink"], "unknown label"),
+    (["--label", "mouth_open", "--mesh", "SPHERE"], "the template topology has"),
+    (["--label", "mouth_open", "--steps", "0"], "steps must be a positive integer, got 0"),
+])
+def test_animate_refuses_bad_input_and_writes_nothing(tmp_path, face_obj, capsys, args, message):
+    sphere = tmp_path / "sphere.obj"
+    trimesh.creation.icosphere(2).export(sphere)
+    argv = ["animate", "--mesh", str(face_obj), "--steps", "2", "--out", str(tmp_path / "out")] + args
+    argv = [str(sphere) if a == "SPHERE" else a for a in argv]
+    with pytest.raises(SystemExit) as e:
+        cli.main(argv)
+    assert e.value.code == 2 and message in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()

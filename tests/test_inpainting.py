@@ -1,0 +1,86 @@
+"""Known frames (Alg. 3): masks, the known-frame step, the non-learned baselines."""
+import numpy as np
+import pytest
+import torch
+
+from facelib import inpainting
+from facelib.diffusion import GaussianDiffusion, linear_betas
+
+
+def test_parse_known_and_mask_errors():
+    m = inpainting.parse_known("0:10,30:40", 40)
+    assert m.sum() == 20 and m[:10].all() and m[30:].all() and not m[10:30].any()
+    assert inpainting.parse_known("5", 8).tolist() == [False] * 5 + [True] + [False] * 2
+    for spec, msg in [("0:50", "outside 0:40"), ("a:b", "cannot read"), ("", "ranges like"), ("0:40", "no unknown")]:
+        with pytest.raises(ValueError, match=msg):
+            inpainting.parse_known(spec, 40)
+    with pytest.raises(ValueError, match="no known frame"):
+        inpainting.check_known_mask(np.zeros(40, bool))
+    with pytest.raises(ValueError, match="has 30 frames but the sequence has 40"):
+        inpainting.check_known_mask(np.ones(30, bool), 40)
+    with pytest.raises(ValueError, match="boolean"):
+        inpainting.check_known_mask(np.full(40, 0.5))
+
+
+@pytest.mark.parametrize("setting", inpainting.FILL_SETTINGS)
+def test_fill_masks_follow_section_5_3(setting):
+    m = inpainting.fill_masks(setting, 500, 40, seed=1)
+    n_known = m.sum(1)
+    if setting == "FFM":  # l ~ U[5, 15] at each end
+        assert m[:, 0].all() and m[:, -1].all() and not m[:, 19:21].any()
+        assert n_known.min() == 10 and n_known.max() == 30 and (n_known % 2 == 0).all()
+    else:  # l ~ U[10, 30]; FFB fills the beginning (the end is known), FFE fills the end
+        assert (m[:, -1] if setting == "FFB" else m[:, 0]).all()
+        assert n_known.min() == 10 and n_known.max() == 30
+    with pytest.raises(ValueError, match="allowed: FFB, FFE, FFM"):
+        inpainting.fill_masks("FFX", 2)
+
+
+@pytest.mark.parametrize("t", [2, 10, 700])
+@pytest.mark.parametrize("respaced", [False, True])
+def test_known_frames_at_step_t_minus_1_have_the_exact_marginal_of_q(t, respaced):
+    # Alg. 3 line 12 (with the errata's abar): after the reverse step t, the known frames are
+    # x_{t-1} ~ N(sqrt(abar_{t-1}) x_0, (1 - abar_{t-1}) I).  At small t the traps are visible: abar_t
+    # instead of abar_{t-1} doubles the variance at t = 2; alpha instead of abar, or the std used as
+    # a variance, are off by orders of magnitude.
+    diffusion = GaussianDiffusion(linear_betas(2000))
+    if respaced:
+        diffusion = diffusion.respace(100)
+        t = min(t, 100)
+    n = 20000
+    x0 = torch.full((n, 2, 68, 3), 0.7, dtype=torch.float64)
+    known = torch.tensor([[True, False]]).expand(n, 2)
+    hook = inpainting.KnownFrames(diffusion, x0, known, torch.Generator().manual_seed(0))
+    x_hat = torch.full_like(x0, 123.0)
+    x = hook(x_hat, None, t, None)
+    assert (x[:, 1] == 123.0).all()  # unknown frames: the model's sample, untouched
+    k = x[:, 0].flatten()
+    abar = diffusion.alphas_bar[t - 1]
+    var, mean = k.var().item(), k.mean().item()
+    assert abs(var / (1 - abar) - 1) < 0.02, (var, 1 - abar)
+    assert abs(mean - np.sqrt(abar) * 0.7) < 4 * np.sqrt((1 - abar) / k.numel()) + 1e-12
+    assert torch.equal(hook(x_hat, None, 1, None)[:, 0], x0[:, 0])  # at t = 1, x_0|S_K is the data itself
+
+
+def test_mean_imputation_and_interpolation():
+    f = np.arange(10, dtype=np.float64)
+    x = np.broadcast_to(f[:, None, None] * np.array([1.0, -2.0, 0.5]), (10, 68, 3))[None].copy()
+    known = np.zeros(10, bool)
+    known[[0, 1, 8, 9]] = True
+    lin = inpainting.linear_interpolation(x, known)
+    np.testing.assert_allclose(lin, x, atol=1e-5)  # a linear motion is filled exactly
+    mean = inpainting.mean_imputation(x, known)
+    np.testing.assert_allclose(mean[0, 4], x[0, [0, 1, 8, 9]].mean(0), atol=1e-5)
+    x_nan = x.copy()
+    x_nan[0, ~known] = np.nan  # unknown frames may be missing values
+    assert np.isfinite(inpainting.linear_interpolation(x_nan, known)).all()
+    assert np.isfinite(inpainting.mean_imputation(x_nan, known)).all()
+    head = np.zeros(10, bool)
+    head[6:] = True  # FFB: frames before the first known one hold it
+    np.testing.assert_allclose(inpainting.linear_interpolation(x, head)[0, :6], np.broadcast_to(x[0, 6], (6, 68, 3)), atol=1e-5)
+    bad = x.copy()
+    bad[0, 0, 0, 0] = np.nan
+    with pytest.raises(ValueError, match="known frames contain NaN"):
+        inpainting.mean_imputation(bad, known)
+    with pytest.raises(ValueError, match=r"\(n, frames, 68, 3\)"):
+        inpainting.mean_imputation(np.zeros((2, 10, 67, 3)), known)
