@@ -9,6 +9,7 @@ from dataclasses import asdict, fields, replace
 import numpy as np
 
 from . import config, data, inpainting, tasks
+from .training.loop import device_for
 
 TASKS = {"unconditional": "the unconditional DDPM (§3.1)", "label": "label control (Alg. 1)",
          "text": "text control (Alg. 2)", "decoder": "a text decoder's sequence refined by the DDPM (not in the paper)",
@@ -37,6 +38,7 @@ def add_parsers(sub):
                    "and the 'config' that produced it)")
     g.add_argument("--n", type=int, default=16, help="number of sequences (default 16)")
     g.add_argument("--checkpoint", default=None, help="denoiser checkpoint (default denoiser_<dataset>)")
+    g.add_argument("--device", default=None, choices=["cpu", "cuda"], help="default: a GPU when torch sees one")
     g.add_argument("--paper", action="store_true", help="the paper's printed algorithm: all T = 2000 steps, no "
                    "addition of the book (options given explicitly still apply)")
     p = sub.add_parser("sample", help="generate landmark sequences: sample TASK --out out.npz (see sample TASK --help)")
@@ -119,6 +121,7 @@ def run(args):
     settings = settings_of(args)
     checkpoint = args.checkpoint or f"denoiser_{settings.dataset}"
     denoiser = tasks.load_denoiser(checkpoint)
+    denoiser.model.to(device_for(args.device))
     n, extra = args.n, {}
     if args.task == "unconditional":
         landmarks = tasks.unconditional(n, settings, denoiser)

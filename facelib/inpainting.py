@@ -102,7 +102,7 @@ class KnownFrames:
 
     def start(self, generator):
         """x_T: N(0, I) on the unknown frames, q(x_T | x_0) on the known ones (Alg. 3 lines 1-2)."""
-        noise = torch.randn(self.x0.shape, generator=generator)
+        noise = torch.randn(self.x0.shape, generator=generator).to(self.x0.device)
         return self.merge(noise, self.noised(self.diffusion.num_steps))
 
     def merge(self, unknown, known):

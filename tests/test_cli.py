@@ -3,6 +3,7 @@ import json
 
 import numpy as np
 import pytest
+import torch
 import trimesh
 
 from facelib import __main__ as cli, config, meshio as io, tasks
@@ -168,3 +169,11 @@ def test_animate_refuses_bad_input_and_writes_nothing(tmp_path, face_obj, capsys
         cli.main(argv)
     assert e.value.code == 2 and message in capsys.readouterr().err
     assert not (tmp_path / "out").exists()
+
+
+def test_sampling_on_an_absent_gpu_is_a_clear_error(tmp_path, capsys):
+    if torch.cuda.is_available():
+        pytest.skip("this machine has a GPU")
+    with pytest.raises(SystemExit):
+        main(["sample", "unconditional", "--n", "1", "--steps", "2", "--device", "cuda", "--out", str(tmp_path / "x.npz")])
+    assert "no CUDA device" in capsys.readouterr().err and not (tmp_path / "x.npz").exists()

@@ -160,7 +160,7 @@ def best_particles(x, score, t, particles):
         s = score(x, t).reshape(particles, n)
     if not torch.isfinite(s).all():
         raise ValueError("the score of a particle is not finite")
-    return x.reshape(particles, n, *x.shape[1:])[s.argmax(0), torch.arange(n)]
+    return x.reshape(particles, n, *x.shape[1:])[s.argmax(0), torch.arange(n, device=x.device)]
 
 
 @dataclass

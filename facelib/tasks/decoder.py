@@ -32,7 +32,7 @@ def decoder_then_diffusion(text, n=8, settings=DecoderThenDiffusion(), denoiser=
     if not 1 <= settings.start <= last:
         raise ValueError(f"start must be a step in 1..{last}, got {settings.start!r}")
     k = max(1, int(np.argmin(np.abs(diffusion.timesteps - settings.start))))
-    x0 = torch.as_tensor(denoiser.normalizer.normalize(generate_from_text(decoder, texts, shape[1])))
-    x_start = diffusion.q_sample(x0, torch.full((n,), k), generator=torch.Generator().manual_seed(settings.seed))
+    x0 = denoiser.to_model(generate_from_text(decoder, texts, shape[1]))
+    x_start = diffusion.q_sample(x0, k, generator=torch.Generator().manual_seed(settings.seed))
     x = diffusion.run(denoiser.model, x_start, settings.seed, diffusion.schedule(k), progress=progress)
-    return denoiser.normalizer.denormalize(x.detach()).numpy()
+    return denoiser.to_mm(x)

@@ -27,8 +27,7 @@ def fill(sequences, known, settings=Fill(), denoiser=None, progress=True, callba
     x, mask = check_fill_input(sequences, known)
     denoiser = denoiser or load_denoiser(f"denoiser_{settings.dataset}")
     diffusion = denoiser.diffusion_with(settings.steps, settings.variance)
-    x0 = torch.as_tensor(denoiser.normalizer.normalize(x))
-    mask_t = torch.as_tensor(mask)
+    x0, mask_t = denoiser.to_model(x), torch.as_tensor(mask).to(denoiser.device)
     reconstruction = (ReconstructionGuidance(denoiser.model, diffusion, x0, mask_t, settings.reconstruction_scale)
                       if settings.reconstruction_scale else None)
     hook = KnownFrames(diffusion, x0, mask_t, known_noise(settings.seed), inner=reconstruction)
@@ -36,4 +35,4 @@ def fill(sequences, known, settings=Fill(), denoiser=None, progress=True, callba
     out = diffusion.run(denoiser.model, x_T, settings.seed, diffusion.schedule(resample=settings.resample), hook,
                         callback, progress)
     # the sampler returns the known frames through normalise/denormalise, exact only to ~1e-6 mm
-    return keep_known(denoiser.normalizer.denormalize(out.detach()).numpy(), x, mask)
+    return keep_known(denoiser.to_mm(out), x, mask)

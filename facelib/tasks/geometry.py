@@ -71,7 +71,7 @@ def geometry_passes(neutral_landmarks, label, n=1, settings=GeometryAdaptive(), 
     restart = diffusion.num_steps if settings.renoise_step is None else int(settings.renoise_step)
     if not 1 <= restart <= diffusion.num_steps:
         raise ValueError(f"renoise_step must be in 1..{diffusion.num_steps} (steps of the sampler), got {restart}")
-    x0, known = torch.as_tensor(denoiser.normalizer.normalize(given)), torch.as_tensor(mask)
+    x0, known = denoiser.to_model(given), torch.as_tensor(mask).to(denoiser.device)
     guidance = OptimisationGuidance(ClassifierScore(guide.model, targets), diffusion, settings.guidance_weight,
                                     settings.lr)
     if settings.reconstruction_scale:
@@ -84,10 +84,10 @@ def geometry_passes(neutral_landmarks, label, n=1, settings=GeometryAdaptive(), 
         if x is None:  # Alg. 4 lines 3-4
             start, first = hook.start(gen), diffusion.num_steps
         else:  # Alg. 4 line 6: x_k = sqrt(abar_k) x_0 + sqrt(1 - abar_k) eps on every frame
-            start, first = diffusion.q_sample(x, torch.full((n,), restart), generator=gen), restart
+            start, first = diffusion.q_sample(x, restart, generator=gen), restart
         steps = diffusion.schedule(first, resample=settings.resample)
         x = diffusion.run(denoiser.model, start, settings.seed + 7919 * i, steps, hook, progress=progress).detach()
-        results.append(keep_known(denoiser.normalizer.denormalize(x).numpy(), given, mask))
+        results.append(keep_known(denoiser.to_mm(x), given, mask))
     return np.stack(results)
 
 

@@ -50,4 +50,4 @@ def label_control(label, n=16, settings=LabelControl(), denoiser=None, guide=Non
     else:
         hook = MeanShiftGuidance(score, diffusion, settings.scale)
     x = diffusion.sample(denoiser.model, shape, seed=settings.seed, guide=hook, progress=progress, callback=callback)
-    return denoiser.normalizer.denormalize(x.detach()).numpy()
+    return denoiser.to_mm(x)

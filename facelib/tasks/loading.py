@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import torch
 
 from .. import data
 from ..checkpoints import load_checkpoint
@@ -25,6 +26,18 @@ class TrainedDenoiser:
     normalizer: LandmarkNormalizer
     diffusion: GaussianDiffusion
     meta: dict
+
+    @property
+    def device(self):
+        return next(self.model.parameters()).device
+
+    def to_model(self, landmarks):
+        """Landmarks in mm (numpy, any leading shape) as a normalised tensor on the model's device."""
+        return torch.as_tensor(self.normalizer.normalize(landmarks)).to(self.device)
+
+    def to_mm(self, x):
+        """Normalised sequences (a tensor on any device) as numpy float32 in mm."""
+        return self.normalizer.denormalize(x.detach().cpu()).numpy()
 
     def diffusion_with(self, steps=None, variance=None):
         """The full T-step diffusion (steps=None) or a respaced one with ``steps`` steps; ``variance`` ("beta",
@@ -111,6 +124,7 @@ def guided_chain(guide, denoiser, settings):
     chain for the task's settings (steps, variance)."""
     denoiser = denoiser or load_denoiser(f"denoiser_{guide.dataset}")
     check_same_space(denoiser, guide)
+    guide.model.to(denoiser.device)
     return denoiser, denoiser.diffusion_with(settings.steps, settings.variance)
 
 

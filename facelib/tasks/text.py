@@ -92,4 +92,4 @@ def text_control(text, n=8, settings=TextControl(), denoiser=None, head=None, pr
         select = max(1, int(np.argmin(np.abs(diffusion.timesteps - settings.select_time))))
         x = BestOfK(score, settings.particles, select).sample(diffusion, denoiser.model, shape, hook, settings.seed,
                                                               progress)
-    return denoiser.normalizer.denormalize(x.detach()).numpy()
+    return denoiser.to_mm(x)

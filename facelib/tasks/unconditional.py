@@ -14,4 +14,4 @@ def unconditional(n, settings=Unconditional(), denoiser=None, progress=True, cal
     denoiser = denoiser or load_denoiser(f"denoiser_{settings.dataset}")
     diffusion = denoiser.diffusion_with(settings.steps, settings.variance)
     x = diffusion.sample(denoiser.model, shape, seed=settings.seed, progress=progress, callback=callback)
-    return denoiser.normalizer.denormalize(x.detach()).numpy()
+    return denoiser.to_mm(x)

@@ -205,8 +205,8 @@ def fit(recipe, progress=True, log_every=50, device=None, resume_from=None, save
     dist = start_distributed(device)
     torch.manual_seed(settings.seed)
     generator = torch.Generator().manual_seed(settings.seed)
-    recipe.device = dist.device
     model = recipe.build(generator).to(dist.device)
+    recipe.to(dist.device)
     objectives = recipe.objectives(model)
     if dist.world > 1:
         if not getattr(recipe, "distributed", True):

@@ -32,10 +32,20 @@ class Recipe:
     name = "model"
     kind = "model"  # the checkpoint kind
     distributed = True  # False: its draws are not per example, so it trains on one process only
-    device = torch.device("cpu")  # set by the loop before build
+    device = torch.device("cpu")  # the training device (Recipe.to)
 
     def objectives(self, model):
         return [Objective(model, lambda draws: self.loss(model, draws))]
+
+    def to(self, device):
+        """Move the recipe's data (tensors, lists of tensors) and helper networks to the training device."""
+        self.device = device
+        for name, value in list(vars(self).items()):
+            if isinstance(value, (torch.Tensor, nn.Module)):
+                setattr(self, name, value.to(device))
+            elif isinstance(value, list) and value and all(isinstance(v, torch.Tensor) for v in value):
+                setattr(self, name, [v.to(device) for v in value])
+        return self
 
     def model_config(self, model):
         return asdict(model.config)
@@ -96,8 +106,6 @@ class DenoiserRecipe(Recipe):
         # the Gaussian prior of the skip connection sees augmented frames too
         swapped = swap_anatomy(self.x_all, self.own, self.pool, self.settings.anatomy_swap, Draws(generator, self.size))
         model.fit_prior(torch.cat([seqs[i, :n] for seqs in (self.x_all, swapped) for i, n in enumerate(self.lengths)]))
-        for name in ("x_all", "mask_all", "own", "pool"):
-            setattr(self, name, getattr(self, name).to(self.device))
         return model
 
     def loss(self, model, draws):
@@ -137,7 +145,7 @@ class _NoisyRecipe(Recipe):
         """(model(x_t, t), indices) for a batch of training sequences."""
         idx = draws.examples(self.size)
         t = draws.randint(0, self.settings.num_diffusion_steps + 1)
-        x0 = self.x_all.to(self.device)[idx]
+        x0 = self.x_all[idx]
         return model(self.diffusion.q_sample(x0, t, eps=draws.randn(*x0.shape[1:])), t.float()), idx
 
     def metadata(self, model):
@@ -163,7 +171,7 @@ class GuideRecipe(_NoisyRecipe):
 
     def loss(self, model, draws):
         logits, idx = self.noisy_batch(model, draws)
-        y = self.targets.to(self.device)[idx]
+        y = self.targets[idx]
         loss = nn.functional.cross_entropy(logits, y)
         return loss, {"loss": loss.item(), "accuracy": (logits.argmax(1) == y).float().mean().item()}
 
@@ -217,8 +225,7 @@ class TextHeadRecipe(_NoisyRecipe):
     def loss(self, model, draws):
         output, idx = self.noisy_batch(model, draws)
         choice = draws.randint(0, self.table.shape[2])
-        table, labels, kinds = (a.to(self.device) for a in (self.table, self.labels, self.kinds))
-        loss, cosine, hit = text_head_loss(output, table, labels[idx], kinds[idx], choice,
+        loss, cosine, hit = text_head_loss(output, self.table, self.labels[idx], self.kinds[idx], choice,
                                            self.settings.contrastive_weight, self.settings.temperature)
         return loss, {"loss": loss.item(), "cosine_loss": cosine.item(), "accuracy": hit.item()}
 
@@ -253,7 +260,7 @@ class EvaluatorRecipe(Recipe):
 
     def loss(self, model, draws):
         idx = draws.examples(self.size)
-        loss = nn.functional.cross_entropy(model(self.x[idx].to(self.device)), self.y[idx].to(self.device))
+        loss = nn.functional.cross_entropy(model(self.x[idx]), self.y[idx])
         return loss, {"loss": loss.item()}
 
     def model_config(self, model):
