@@ -244,6 +244,12 @@ class LSTMFillerTraining(Optimisation):
     alpha_gt: float = 10.0  # Berson et al.'s weight of the known frames
 
 
+DEFORMATION_DATASET = "coma"  # §6: the deformation experiments use CoMA
+# §6's expression split holds out 3 expressions; the paper does not name them.  Our choice: one smile, one jaw
+# opening and one asymmetric motion, each with relatives left in training.
+HELD_OUT_EXPRESSIONS = ("high_smile", "mouth_open", "mouth_side")
+
+
 @dataclass(frozen=True)
 class DeformationTraining(Optimisation):
     """The deformation networks of Table 5 (S2D: Adam, lr 1e-3, batch 16 meshes)."""

@@ -28,13 +28,12 @@ import numpy as np
 import torch
 
 from . import data, metrics
+from .config import DEFORMATION_DATASET as DATASET, HELD_OUT_EXPRESSIONS
 from .checkpoints import checkpoint_paths, load_checkpoint
 from .face import template as tpl
 from .face.template import check_neutral_mesh
 from .models import coma, deformer, linear_deformer
 
-DATASET = "coma"  # §6: the deformation experiments use CoMA
-HELD_OUT_EXPRESSIONS = ("high_smile", "mouth_open", "mouth_side")  # our choice (the paper does not say)
 SPLITS = ("identity", "expression")
 METHODS = {  # Table 5 row -> (model module, model config)
     "ours": (deformer, deformer.DeformerConfig()),

@@ -175,5 +175,6 @@ def test_sampling_on_an_absent_gpu_is_a_clear_error(tmp_path, capsys):
     if torch.cuda.is_available():
         pytest.skip("this machine has a GPU")
     with pytest.raises(SystemExit):
-        main(["sample", "unconditional", "--n", "1", "--steps", "2", "--device", "cuda", "--out", str(tmp_path / "x.npz")])
+        main(["sample", "unconditional", "--n", "1", "--steps", "2", "--device", "cuda",
+              "--out", str(tmp_path / "x.npz")])
     assert "no CUDA device" in capsys.readouterr().err and not (tmp_path / "x.npz").exists()

@@ -47,6 +47,16 @@ def _known_neutral(neutral_landmarks, names, num_frames):
     return given, mask
 
 
+def _alg4_hook(settings, denoiser, diffusion, score, x0, known):
+    """The sampler hook of Alg. 4: the label guidance of Alg. 1 (then, with a reconstruction scale, reconstruction
+    guidance), and the given frames re-drawn from q as in Alg. 3."""
+    guidance = OptimisationGuidance(score, diffusion, settings.guidance_weight, settings.lr)
+    if settings.reconstruction_scale:
+        guidance = chain(guidance, ReconstructionGuidance(denoiser.model, diffusion, x0, known,
+                                                          settings.reconstruction_scale))
+    return KnownFrames(diffusion, x0, known, known_noise(settings.seed), inner=guidance)
+
+
 def geometry_passes(neutral_landmarks, label, n=1, settings=GeometryAdaptive(), denoiser=None, guide=None,
                     progress=True, **overrides):
     """Geometry-adaptive generation (Alg. 4), every harmonising pass: (passes, n, F, 68, 3) float32 in mm.
@@ -72,12 +82,7 @@ def geometry_passes(neutral_landmarks, label, n=1, settings=GeometryAdaptive(), 
     if not 1 <= restart <= diffusion.num_steps:
         raise ValueError(f"renoise_step must be in 1..{diffusion.num_steps} (steps of the sampler), got {restart}")
     x0, known = denoiser.to_model(given), torch.as_tensor(mask).to(denoiser.device)
-    guidance = OptimisationGuidance(ClassifierScore(guide.model, targets), diffusion, settings.guidance_weight,
-                                    settings.lr)
-    if settings.reconstruction_scale:
-        guidance = chain(guidance, ReconstructionGuidance(denoiser.model, diffusion, x0, known,
-                                                          settings.reconstruction_scale))
-    hook = KnownFrames(diffusion, x0, known, known_noise(settings.seed), inner=guidance)
+    hook = _alg4_hook(settings, denoiser, diffusion, ClassifierScore(guide.model, targets), x0, known)
     results, x = [], None
     for i in range(settings.passes):
         gen = torch.Generator().manual_seed(settings.seed + 7919 * i)
