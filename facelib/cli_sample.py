@@ -56,7 +56,8 @@ def add_parsers(sub):
     for task in ("label", "text", "geometry"):
         _option(t[task], task, "lr", "Adagrad learning rate of the guidance (None: the book's choice for the "
                 "dataset and the number of steps)", type=float)
-        _option(t[task], task, "guidance_weight", "lambda of Alg. 1-2", type=float)
+        _option(t[task], task, "guidance_weight", "lambda of Alg. 1-2 (None: the book's choice for the text score)",
+                type=float)
     for task in ("label", "geometry"):
         t[task].add_argument("--label", required=True, help="an expression label of the dataset, e.g. high_smile "
                              "(geometry: or 'mouth_open E2N')")

@@ -409,7 +409,7 @@ class TextControl(Sampling):
 
     def paper(self):
         return replace(self, steps=None, variance="beta", score="cosine", head_input="x_t", vocabulary=False,
-                       particles=1, max_time=None)
+                       particles=1, max_time=None, guidance_weight=GUIDANCE_WEIGHT)  # §4: lambda = 0.01
 
 
 @dataclass(frozen=True)
