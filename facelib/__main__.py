@@ -43,6 +43,11 @@ TRAINABLE = ("denoiser", "guide", "text_head", "evaluator", "motion3dgan", "acto
 
 
 def _train(args):
+    if args.name == "all":
+        if args.only and any(o not in training.SHIPPED for o in args.only):
+            raise ValueError(f"--only takes shipped checkpoints: {', '.join(training.SHIPPED)}")
+        training.train_all(args.only, fast=args.fast, out_dir=args.out)
+        return 0
     given = {"dataset": args.dataset, "classifier_type": args.type, "method": args.method, "split": args.split,
              "steps": args.steps, "batch_size": args.batch_size, "seed": args.seed,
              "num_frames": (35, 45) if args.variable_length else None}
@@ -121,7 +126,9 @@ def main(argv=None):
 
     p = sub.add_parser("train", help="train a model and save it in data/checkpoints (.pt + .json); under "
                        "`torchrun --nproc_per_node N -m facelib train ...` on N processes (distributed data parallel)")
-    p.add_argument("name", choices=list(TRAINABLE), help="denoiser: eps_theta of §3.1; guide: the noisy classifier of "
+    p.add_argument("name", choices=[*TRAINABLE, "all"], help="all: every shipped checkpoint with its recipe "
+                   "(training.SHIPPED; --only to pick some, --out a folder to write them to); "
+                   "denoiser: eps_theta of §3.1; guide: the noisy classifier of "
                    "Alg. 1/4; text_head: BiT(x_t, t) of Alg. 2; evaluator: the independent LSTM classifier of §5; "
                    "motion3dgan, actor: the baselines of Table 1; motionclip: the baseline of Table 2; lstm_filler: "
                    "the baseline of Table 3; deformer: the mesh deformation of §3.3 and the baselines of Table 5")
@@ -142,8 +149,10 @@ def main(argv=None):
     p.add_argument("--device", default=None, choices=["cpu", "cuda"], help="default: a GPU when torch sees one")
     p.add_argument("--resume", action="store_true", help="continue from <out>.state.pt if a run left one "
                    "(the state is written every 500 steps)")
+    p.add_argument("--only", nargs="+", default=None, help="train all: only these shipped checkpoints")
     p.add_argument("--out", default=None, help="checkpoint name or path stem (default: denoiser_<dataset>[_var], "
-                   "guide_<dataset>_<type>, ic_<dataset>_<type>, deform_<method>_<split>, <baseline>_<dataset>)")
+                   "guide_<dataset>_<type>, ic_<dataset>_<type>, deform_<method>_<split>, <baseline>_<dataset>); "
+                   "train all: a folder (default data/checkpoints)")
     p.set_defaults(func=_train)
 
     cli_sample.add_parsers(sub)

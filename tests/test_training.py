@@ -1,4 +1,6 @@
 """The one training loop: schedule, logging, resume, and distributed data parallel under torchrun."""
+import dataclasses
+import json
 import os
 import subprocess
 import sys
@@ -120,3 +122,24 @@ def test_anatomy_augmentation_keeps_the_motion_and_swaps_the_neutral_face(coma_t
     new_neutral = own + shift[:, 0]
     dist = (new_neutral[:, None] - pool[None]).norm(dim=-1).mean(-1).min(1).values
     assert (dist < 1e-4).all()  # the new neutral face is one of the pool's
+
+
+def test_every_shipped_checkpoint_is_the_recipe_that_train_all_runs():
+    """training.SHIPPED rebuilds data/checkpoints: every checkpoint is there, with the settings it records."""
+    shipped = {p.stem for p in config.CHECKPOINT_DIR.glob("*.json")}
+    assert shipped == set(training.SHIPPED)
+    renamed = {"sequences_per_batch": "batch_size"}  # the deformers' batch, named so before the one loop
+    for name, (model, settings) in training.SHIPPED.items():
+        recorded = json.loads((config.CHECKPOINT_DIR / f"{name}.json").read_text())["training"]
+        recorded = {renamed.get(k, k): v for k, v in recorded.items()}
+        for key, value in dataclasses.asdict(training.settings_for(model, **settings)).items():
+            if key in recorded:
+                assert recorded[key] == (list(value) if isinstance(value, tuple) else value), (name, key)
+
+
+def test_train_all_writes_the_chosen_checkpoints_and_their_times(tmp_path):
+    rows = training.train_all(["ic_coma_I", "actor_bu"], fast=True, out_dir=tmp_path, progress=False)
+    assert [r[0] for r in rows] == ["ic_coma_I", "actor_bu"] and all(r[3] > 0 for r in rows)
+    assert (tmp_path / "ic_coma_I.pt").exists() and (tmp_path / "actor_bu.json").exists()
+    with pytest.raises(ValueError, match="no shipped checkpoint 'ic_coma_X'; the shipped ones: denoiser_coma"):
+        training.train_all(["ic_coma_X"], fast=True, out_dir=tmp_path)

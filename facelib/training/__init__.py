@@ -1,24 +1,41 @@
 """Training: one loop (:mod:`facelib.training.loop`) and one recipe per model (:mod:`facelib.training.recipes`).
 
-    model, history = training.fit(training.DenoiserRecipe(config.DenoiserTraining(steps=100)))
-    training.train_and_save("guide", dataset="bu", classifier_type="S")      # python -m facelib train guide ...
+    model, history = training.fit(training.recipe("denoiser", steps=100))
+    training.train_and_save(training.recipe("guide", dataset="bu", classifier_type="S"))  # train guide --type S ...
+    training.train_all()                                                     # python -m facelib train all
 
 The same loop runs unchanged under ``torchrun --nproc_per_node N -m facelib train NAME`` (distributed
 data parallel; see the loop's docstring).  Every setting's default is in facelib/config.py.
 """
 from __future__ import annotations
 
+import time
 from dataclasses import fields, replace
+from pathlib import Path
 
+from .. import results
 from ..checkpoints import save_checkpoint
 from .loop import Draws, TrainingLog, fit, is_main_process
 from .recipes import (RECIPES, SETTINGS, ActorRecipe, DeformationRecipe, DenoiserRecipe, EvaluatorRecipe, GuideRecipe,
                       LSTMFillerRecipe, Motion3DGANRecipe, MotionClipRecipe, TextHeadRecipe, swap_anatomy,
                       text_head_loss, training_anatomies)
+from .shipped import SHIPPED
+
+__all__ = ["Draws", "TrainingLog", "fit", "is_main_process", "RECIPES", "SETTINGS", "ActorRecipe", "DeformationRecipe",
+           "DenoiserRecipe", "EvaluatorRecipe", "GuideRecipe", "LSTMFillerRecipe", "Motion3DGANRecipe",
+           "MotionClipRecipe", "TextHeadRecipe", "swap_anatomy", "text_head_loss", "training_anatomies", "SHIPPED",
+           "recipe", "settings_for", "save_trained", "train_and_save", "train_all"]
 
 
 def recipe(model_name, fast=False, **settings):
-    """The recipe of a model by name (``RECIPES``) with its default settings changed by ``settings``.
+    """The recipe of a model by name (``RECIPES``) with its default settings changed by ``settings``
+    (:func:`settings_for`)."""
+    chosen = settings_for(model_name, fast, **settings)
+    return RECIPES[model_name](chosen)
+
+
+def settings_for(model_name, fast=False, **settings):
+    """A model's training settings: its defaults (facelib/config.py) changed by ``settings``.
 
     ``steps`` keeps the warm-up at most a tenth of the run (``Optimisation.with_steps``); ``fast``: the
     settings' fast-mode version (a few steps, for tests and FACELIB_FAST chapters)."""
@@ -35,7 +52,7 @@ def recipe(model_name, fast=False, **settings):
         if chosen.epochs is not None:
             raise ValueError(f"{model_name} trains for a number of epochs ({chosen.epochs}): set epochs, not steps")
         chosen = chosen.with_steps(steps)
-    return RECIPES[model_name](chosen.fast() if fast else chosen)
+    return chosen.fast() if fast else chosen
 
 
 def save_trained(recipe, model, history, name=None):
@@ -52,3 +69,28 @@ def train_and_save(recipe, name=None, progress=True, device=None, resume=False):
     stem = name or recipe.checkpoint_name()
     model, history = fit(recipe, progress=progress, device=device, resume_from=stem if resume else None)
     return save_trained(recipe, model, history, name) if is_main_process() else None
+
+
+def train_all(names=None, fast=False, out_dir=None, progress=True):
+    """Retrain the shipped checkpoints ``names`` (None: all, in the order of SHIPPED) and write them to
+    data/checkpoints (or ``out_dir``).  Returns rows [name, model, steps, seconds]; a full run into
+    data/checkpoints also stores them as results/train_all.json."""
+    names = list(SHIPPED) if names is None else list(names)
+    unknown = [n for n in names if n not in SHIPPED]
+    if unknown:
+        raise ValueError(f"no shipped checkpoint {unknown[0]!r}; the shipped ones: {', '.join(SHIPPED)}")
+    rows, t_start = [], time.perf_counter()
+    for name in names:
+        model, settings = SHIPPED[name]
+        r = recipe(model, fast=fast, **settings)
+        t0 = time.perf_counter()
+        train_and_save(r, name=str(Path(out_dir) / name) if out_dir else name, progress=progress)
+        rows.append([name, model, r.settings.epochs or r.settings.steps, time.perf_counter() - t0])
+        print(f"{name}: {rows[-1][3]:.0f} s", flush=True)
+    if out_dir is None and not fast:
+        results.save_result("train_all", "Retraining every shipped checkpoint (python -m facelib train all)",
+                            ["checkpoint", "model", "steps (epochs for the IC)", "seconds"], rows,
+                            results.Run(checkpoints=names, seeds=[0], n=len(names), steps=[],
+                                        wall_time_s=time.perf_counter() - t_start,
+                                        command="python -m facelib train all"))
+    return rows

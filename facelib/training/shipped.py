@@ -1,0 +1,29 @@
+"""Every shipped checkpoint (data/checkpoints) as the recipe that trains it (``training.train_all`` retrains them).
+
+``SHIPPED[name] = (model, settings)``: the model's recipe (training.RECIPES) with these settings changed from
+its defaults (facelib/config.py).  tests/test_training.py checks that every shipped checkpoint is here and
+that its recorded settings are these, so ``python -m facelib train all`` rebuilds exactly what is shipped.
+"""
+from __future__ import annotations
+
+_DEFORMER_METHODS = ("ours", "no_attention", "s2d", "coma", "linear")
+SHIPPED = {
+    "denoiser_coma": ("denoiser", {}),
+    "denoiser_bu": ("denoiser", {"dataset": "bu"}),
+    "denoiser_coma+bu": ("denoiser", {"dataset": "coma+bu"}),
+    "denoiser_coma_var": ("denoiser", {"num_frames": (35, 45), "steps": 8000}),
+    "guide_coma_I": ("guide", {}),
+    "guide_coma_S": ("guide", {"classifier_type": "S"}),
+    "guide_bu_I": ("guide", {"dataset": "bu"}),
+    "guide_coma+bu_text": ("text_head", {}),
+    **{f"ic_{d}_{c}": ("evaluator", {"dataset": d, "classifier_type": c}) for d in ("coma", "bu", "coma+bu")
+       for c in ("I", "S")},
+    "actor_coma": ("actor", {}),
+    "actor_bu": ("actor", {"dataset": "bu"}),
+    "motion3dgan_coma": ("motion3dgan", {}),
+    "motion3dgan_bu": ("motion3dgan", {"dataset": "bu"}),
+    "motionclip_coma+bu": ("motionclip", {}),
+    "lstm_filler_coma": ("lstm_filler", {}),
+    **{f"deform_{m}_{s}": ("deformer", {"method": m, "split": s}) for m in _DEFORMER_METHODS
+       for s in ("identity", "expression")},
+}
