@@ -1,5 +1,5 @@
 """From landmarks back to a face mesh by fitting the synthetic world's AU rig (a stand-in for the
-FLAME fitting that paper §6 compares against, footnote 1: 470 s per sequence there).
+FLAME fitting that the paper compares against in footnote 1 of App. B: 470 s per sequence there).
 
 Before the learned landmark-guided deformation of the mesh-deformation chapter, this is how the
 chapters show generated landmark sequences as faces: choose the known face whose neutral landmarks fit
