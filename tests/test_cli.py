@@ -14,6 +14,14 @@ from facelib.face import template as tpl
 T = tpl.get_template()
 
 
+def sample(out, *args):
+    """Run ``python -m facelib sample ARGS --out OUT``; its arrays and the config it records."""
+    assert main(["sample", *args, "--out", str(out)]) == 0
+    with np.load(out) as f:
+        arrays = {k: f[k] for k in f.files}
+    return arrays, json.loads(str(arrays["config"]))
+
+
 def test_cli_fill_and_geometry(tmp_path, coma_test, capsys):
     seq = tmp_path / "seq.npz"
     np.savez(seq, landmarks=coma_test.landmarks[0])
@@ -40,11 +48,8 @@ def test_cli_fill_and_geometry(tmp_path, coma_test, capsys):
 
 
 def test_cli_label_task_writes_npz(tmp_path):
-    from facelib.__main__ import main
     out = tmp_path / "smile.npz"
-    assert main(["sample", "label", "--label", "high_smile", "--n", "2", "--steps", "5",
-                 "--out", str(out)]) == 0
-    npz = np.load(out)
+    npz, _ = sample(out, "label", "--label", "high_smile", "--n", "2", "--steps", "5")
     assert npz["landmarks"].shape == (2, 40, 68, 3) and npz["landmarks"].dtype == np.float32
     assert list(npz["labels"]) == ["high_smile", "high_smile"]
     assert '"guidance_weight": 0.01' in str(npz["config"])
@@ -54,34 +59,25 @@ def test_cli_label_task_writes_npz(tmp_path):
 
 
 def test_cli_text_task_writes_npz(tmp_path, capsys):
-    from facelib.__main__ import main
     out = tmp_path / "text.npz"
-    assert main(["sample", "text", "--text", "disgust high smile", "--n", "2", "--steps", "5",
-                 "--out", str(out)]) == 0
-    npz = np.load(out)
+    npz, used = sample(out, "text", "--text", "disgust high smile", "--n", "2", "--steps", "5")
     assert npz["landmarks"].shape == (2, 40, 68, 3) and list(npz["texts"]) == ["disgust high smile"] * 2
-    used = json.loads(str(npz["config"]))
     assert used["dataset"] == "coma+bu" and used["guidance"] == "guide_coma+bu_text"
     assert used["lr"] == pytest.approx(tasks.text_lr(5))
     assert used["guidance_weight"] == config.TEXT_GUIDANCE_WEIGHT and used["head_input"] == "x_t"
     assert used["particles"] == 1 and used["max_time"] is None
-    assert main(["sample", "text", "--text", "from sad to the neutral face", "--n", "1", "--steps", "3",
-                 "--head-input", "x0_hat", "--out", str(out)]) == 0
-    assert json.loads(str(np.load(out)["config"]))["head_input"] == "x0_hat"
-    assert main(["sample", "text", "--text", "from sad to the neutral face", "--n", "1", "--steps", "3",
-                 "--score", "contrastive", "--out", str(out)]) == 0
-    used = json.loads(str(np.load(out)["config"]))
+    sad = ("text", "--text", "from sad to the neutral face")
+    assert sample(out, *sad, "--n", "1", "--steps", "3", "--head-input", "x0_hat")[1]["head_input"] == "x0_hat"
+    _, used = sample(out, *sad, "--n", "1", "--steps", "3", "--score", "contrastive")
     assert used["score"] == "contrastive" and used["guidance_weight"] == config.CONTRASTIVE_GUIDANCE_WEIGHT
     assert used["lr"] == pytest.approx(tasks.text_lr(3, score="contrastive"))
-    assert main(["sample", "text", "--text", "from sad to the neutral face", "--n", "2", "--steps", "10",
-                 "--score", "contrastive", "--particles", "3", "--max-time", "1400", "--out", str(out)]) == 0
-    used = json.loads(str(np.load(out)["config"]))
+    npz, used = sample(out, *sad, "--n", "2", "--steps", "10", "--score", "contrastive", "--particles", "3",
+                       "--max-time", "1400")
     assert used["particles"] == 3 and used["select_time"] == config.SELECT_TIME and used["max_time"] == 1400
-    assert np.load(out)["landmarks"].shape == (2, 40, 68, 3)
+    assert npz["landmarks"].shape == (2, 40, 68, 3)
     assert used["vocabulary"] is False
-    assert main(["sample", "text", "--text", "beaming", "--n", "1", "--steps", "3", "--score", "contrastive",
-                 "--vocabulary", "--out", str(out)]) == 0
-    assert json.loads(str(np.load(out)["config"]))["vocabulary"] is True
+    assert sample(out, "text", "--text", "beaming", "--n", "1", "--steps", "3", "--score", "contrastive",
+                  "--vocabulary")[1]["vocabulary"] is True
     with pytest.raises(SystemExit):
         main(["sample", "text", "--text", "beaming", "--n", "1", "--steps", "3", "--vocabulary",
               "--out", str(out)])
@@ -89,11 +85,9 @@ def test_cli_text_task_writes_npz(tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(["sample", "label", "--label", "happy", "--particles", "2", "--out", str(out)])
     assert "unrecognized arguments: --particles" in capsys.readouterr().err  # an option of text only
-    assert main(["sample", "decoder", "--text", "from sad to the neutral face", "--n", "2", "--steps", "20",
-                 "--start", "400", "--out", str(out)]) == 0
-    used = json.loads(str(np.load(out)["config"]))
+    npz, used = sample(out, "decoder", *sad[1:], "--n", "2", "--steps", "20", "--start", "400")
     assert used["task"] == "decoder" and used["start"] == 400 and used["guidance"] == "motionclip_coma+bu"
-    assert np.load(out)["landmarks"].shape == (2, 40, 68, 3)
+    assert npz["landmarks"].shape == (2, 40, 68, 3)
     for extra in (["--lr", "0.1"], ["--head-input", "x0_hat"], ["--score", "contrastive"], ["--particles", "2"],
                   ["--vocabulary"]):  # options of Alg. 2, which the decoder route does not run
         with pytest.raises(SystemExit):
@@ -104,12 +98,8 @@ def test_cli_text_task_writes_npz(tmp_path, capsys):
 
 
 def test_cli_sample_writes_npz(tmp_path):
-    out = tmp_path / "out.npz"
-    assert main(["sample", "unconditional", "--n", "2", "--length", "30", "--steps", "4",
-                 "--out", str(out)]) == 0
-    z = np.load(out)
+    z, cfg = sample(tmp_path / "out.npz", "unconditional", "--n", "2", "--length", "30", "--steps", "4")
     assert z["landmarks"].shape == (2, 30, 68, 3) and z["landmarks"].dtype == np.float32
-    cfg = json.loads(str(z["config"]))
     assert cfg["steps"] == 4 and cfg["checkpoint"] == "denoiser_coma"
 
 
