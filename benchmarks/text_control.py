@@ -11,18 +11,18 @@ steps (2000 = the paper's T; fewer = respaced) it prints the wall time, the time
 IC accuracy and FID of the generated sequences (FID against the training split, from n sequences:
 compare rows with each other, not with tables computed from another n), and the Adagrad rate used
 (default: tasks.text_lr, scaled with the number of steps; --lr fixes it).  --head-input lists what
-the text head reads (x_t: Alg. 2; x0_hat: the denoiser's estimate, chapter 06 section 8), --score
+the text head reads (x_t: Alg. 2; x0_hat: the denoiser's estimate, appendix A1, section 2), --score
 the score Alg. 2 climbs (cosine: Eq. 10; contrastive: the head's log-probability of the text,
-chapter 06 section 10; it reads x_t only, so it is run with x_t), --particles the numbers K of
-best-of-K chains (chapter 06 section 11).  --split takes the texts from another split of
+appendix A1, section 3; it reads x_t only, so it is run with x_t), --particles the numbers K of
+best-of-K chains (appendix A1, section 4).  --split takes the texts from another split of
 facelib/descriptions.py (held_out, blind_held_out: the n sequences cycle through the classes, then
 through each class's phrasings or sentences), and --vocabulary adds rows of the contrastive score
-matching against the vocabulary (chapter 06 section 12).  The lambda is text_control's
+matching against the vocabulary (appendix A1, section 6).  The lambda is text_control's
 default for each score; --setting LAMBDA RATE (repeatable) runs the guided rows at these lambdas and
 Adagrad rates instead (a rate at config.TEXT_LR_REFERENCE_STEPS = 100 steps, scaled to each number of
-steps as tasks.text_lr scales its default): chapter 06 sections 4 and 10 sweep them.  Also
-timed: the MotionCLIP-style baseline (one decoder pass) and decoder + DDPM (not in the paper,
-chapter 06 section 9: the baseline's sequence re-noised to config.DECODER_START and denoised);
+steps as tasks.text_lr scales its default): chapter 06 section 4 and appendix A1 section 3 sweep
+them.  Also timed: the MotionCLIP-style baseline (one decoder pass) and decoder + DDPM (not in the paper,
+appendix A1 section 5: the baseline's sequence re-noised to config.DECODER_START and denoised);
 --no-baselines leaves them out.  Every Acc and FID comes with its 95 % bootstrap interval over the n
 sequences (Evaluator.score(intervals=True)); --save NAME also writes the table to results/NAME.json
 (facelib.results.save_result: the command, commit, checkpoints' sha256, seeds, n, wall time).
@@ -34,7 +34,7 @@ versions and shows these stored tables):
       --setting 0.0003 0.1 --setting 0.0003 0.2 --setting 0.0003 0.4 --setting 0.0001 0.2   # section 4, 8 min
   python benchmarks/text_control.py --n 72 --steps 100 --enriched --score contrastive --no-baselines \
       --setting 0.0001 0.2 --setting 0.001 0.1 --setting 0.01 0.042 --setting 0.01 0.06 \
-      --save text_sweep_contrastive                                                     # section 10, 4 min
+      --save text_sweep_contrastive                                                     # appendix A1, 4 min
   python benchmarks/text_control.py --n 409 --steps 100 --score cosine contrastive --save text_table2_raw   # 12 min
   python benchmarks/text_control.py --n 409 --steps 100 --enriched --score cosine contrastive --particles 1 4 \
       --save text_table2_enriched                                                       # 53 min
@@ -63,11 +63,11 @@ def main():
     parser.add_argument("--head-input", nargs="+", default=["x_t"], choices=list(config.HEAD_INPUTS))
     parser.add_argument("--score", nargs="+", default=["cosine"], choices=list(config.TEXT_SCORES))
     parser.add_argument("--particles", type=int, nargs="+", default=[1],
-                        help="best-of-K (chapter 06 section 11; K > 1 runs with max_time = config.PARTICLE_MAX_TIME)")
+                        help="best-of-K (appendix A1 section 4; K > 1 runs with max_time = config.PARTICLE_MAX_TIME)")
     parser.add_argument("--split", default="train", choices=list(descriptions.SPLITS),
                         help="the descriptions' split the texts come from (default: train)")
     parser.add_argument("--vocabulary", action="store_true",
-                        help="also run the contrastive score with vocabulary=True (chapter 06 section 12)")
+                        help="also run the contrastive score with vocabulary=True (appendix A1, section 6)")
     parser.add_argument("--setting", type=float, nargs=2, action="append", metavar=("LAMBDA", "RATE"),
                         help="run the guided rows at this lambda and Adagrad rate (at 100 steps); repeatable")
     parser.add_argument("--no-baselines", action="store_true",
@@ -116,7 +116,7 @@ def main():
     if not args.no_baselines:
         model = baselines.load_baseline("motionclip", DATASET)
         row("MotionCLIP-style", lambda: baselines.generate_from_text(model, texts, encoder=encoder), targets)
-        for steps in args.steps:  # not in the paper: the decoder's sequence re-noised and denoised (chapter 06 section 9)
+        for steps in args.steps:  # not in the paper: the decoder's sequence re-noised and denoised (appendix A1)
             row(f"decoder + DDPM (t0={config.DECODER_START})", lambda: tasks.decoder_then_diffusion(
                 texts, args.n, steps=steps, seed=0, denoiser=denoiser, decoder=model,
                 progress=False), targets, steps)

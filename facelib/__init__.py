@@ -7,10 +7,12 @@ The map of the package, bottom to top.  A module imports only from the layers be
 0. ``config``       every default: datasets, training recipes, sampling tasks (paper value or our choice)
 1. ``face``         the synthetic face world: template, identities, action units, expressions, sequences;
    ``metrics``      accuracy, FID, diversity, seams, bootstrap intervals;  ``srvf``  square-root velocity
-   ``chapters``     run one chapter notebook (``make chapter N=05``)
+   ``chapters``     run one chapter notebook (``make chapter N=05``) and record its time;
+   ``paper``        the paper's published tables, as printed
 2. ``data``         dataset generation and cache, FaceDataset, splits, the landmark normaliser;
    ``descriptions`` the words for every expression;  ``diffusion``  schedules and GaussianDiffusion (Eq. 1-8);
-   ``viz``          plots, renders, GIFs;  ``meshio``  OBJ in and out, all or nothing
+   ``viz``          plots, renders, GIFs;  ``meshio``  OBJ in and out, all or nothing;
+   ``tables``       numbers with their intervals, Markdown tables, the paper's table beside ours
 3. ``text``         the offline sentence encoder;  ``models``  networks and their configs only;
    ``checkpoints``  weights + JSON config, sha256-checked
 4. ``guidance``     sampler hooks: Adagrad optimisation (Alg. 1-2), mean shift, reconstruction guidance;
@@ -18,7 +20,8 @@ The map of the package, bottom to top.  A module imports only from the layers be
    ``results``      stored full-scale results with their provenance
 5. ``baselines``    the related papers' models;  ``deformation``  §3.3 mesh deformation;
    ``evaluation``   the independent classifier and its scores
-6. ``tasks``        unconditional, label (Alg. 1), text (Alg. 2), fill (Alg. 3), geometry (Alg. 4)
+6. ``tasks``        unconditional, label (Alg. 1), text (Alg. 2), fill (Alg. 3), geometry (Alg. 4);
+   ``text_eval``    measurements of text control: what the head reads, compositions, order and label
 7. ``pipeline``     neutral mesh -> animated meshes;  ``training``  one loop, one recipe per model
 8. ``cli_sample``   the command line's ``sample TASK`` (a subcommand per task, options from config)
 9. ``__main__``     the command line: ``python -m facelib data|train|sample TASK|neutral|animate|chapter|results``
@@ -26,10 +29,10 @@ The map of the package, bottom to top.  A module imports only from the layers be
 The public API is the modules themselves: ``from facelib import tasks; tasks.label_control("high_smile")``.
 """
 # The layer of every module and subpackage (the map above); tests/test_layout.py checks each import against it.
-LAYERS = {"config": 0, "face": 1, "metrics": 1, "srvf": 1, "chapters": 1, "data": 2, "descriptions": 2,
-          "diffusion": 2, "viz": 2, "meshio": 2, "text": 3, "models": 3, "checkpoints": 3, "guidance": 4,
+LAYERS = {"config": 0, "face": 1, "metrics": 1, "srvf": 1, "chapters": 1, "paper": 1, "data": 2, "descriptions": 2,
+          "diffusion": 2, "viz": 2, "meshio": 2, "tables": 2, "text": 3, "models": 3, "checkpoints": 3, "guidance": 4,
           "inpainting": 4, "rig_fit": 4, "toy": 4, "results": 4, "baselines": 5, "deformation": 5, "evaluation": 5,
-          "tasks": 6, "pipeline": 7, "training": 7, "cli_sample": 8, "__main__": 9}
+          "tasks": 6, "text_eval": 6, "pipeline": 7, "training": 7, "cli_sample": 8, "__main__": 9}
 __all__ = ["baselines", "chapters", "checkpoints", "cli_sample", "config", "data", "deformation", "descriptions",
-           "diffusion", "evaluation", "face", "guidance", "inpainting", "meshio", "metrics", "models", "pipeline",
-           "results", "rig_fit", "srvf", "tasks", "text", "toy", "training", "viz"]
+           "diffusion", "evaluation", "face", "guidance", "inpainting", "meshio", "metrics", "models", "paper",
+           "pipeline", "results", "rig_fit", "srvf", "tables", "tasks", "text", "text_eval", "toy", "training", "viz"]

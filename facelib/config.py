@@ -299,7 +299,7 @@ HEAD_INPUTS = ("x_t", "x0_hat")
 # log-probability of the text against the training descriptions of its wording (guidance.ContrastiveScore)
 TEXT_SCORES = ("cosine", "contrastive")
 # The contrastive score's lambda (the paper's 0.01) and Adagrad rate at TEXT_LR_REFERENCE_STEPS steps: the pick
-# of the text-control chapter's sweep (72 sequences, two seeds, best Acc - 2 FID summed over both tasks)
+# of appendix A1's stored sweep (72 sequences, two seeds, best Acc - 2 FID summed over both tasks)
 CONTRASTIVE_GUIDANCE_WEIGHT = 0.01
 CONTRASTIVE_LR = 0.042
 # How sharply a text is matched to the training descriptions by the contrastive score (our choice: an enriched
@@ -307,10 +307,10 @@ CONTRASTIVE_LR = 0.042
 MATCH_TEMPERATURE = 0.005
 # Best-of-K particles (not in the paper): the time label at which the K guided chains of each text are compared
 # by the text head, and the time above which they are left unguided (the head reads nothing there); our
-# choices from the text-control chapter's measurements
+# choices from appendix A1's measurements (when the chains decide the order, what the head reads)
 SELECT_TIME = 600
 PARTICLE_MAX_TIME = 1400
-DECODER_START = 400  # decoder_then_diffusion's re-noising step (not in the paper): the text-control chapter's sweep
+DECODER_START = 400  # decoder_then_diffusion's re-noising step (not in the paper): our choice, appendix A1
 
 
 def _check_choice(name, value, allowed):

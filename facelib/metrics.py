@@ -180,3 +180,16 @@ def bootstrap_interval(statistic, *samples, num_resamples=1000, level=0.95, seed
     bias = np.mean(values) - statistic(*arrays)
     low, high = np.quantile(values, [(1 - level) / 2, (1 + level) / 2]) - bias
     return float(low), float(high)
+
+
+def completion_spread(completions, known):
+    """How different the completions of one input are: per input, the distance between two of its K
+    completions (mm, mean over landmarks and over the unknown frames), averaged over the K(K-1)/2 pairs.
+
+    completions: (n, K, F, 68, 3), K >= 2 completions of each of n inputs; known: (n, F) bool.  Returns (n,)."""
+    c, m = np.asarray(completions), np.asarray(known, bool)
+    if c.ndim != 5 or c.shape[1] < 2 or m.shape != (c.shape[0], c.shape[2]):
+        raise ValueError(f"need completions (n, K >= 2, F, 68, 3) and known (n, F), got {c.shape} and {m.shape}")
+    pairs = [(a, b) for a in range(c.shape[1]) for b in range(a + 1, c.shape[1])]
+    dist = np.stack([np.linalg.norm(c[:, a] - c[:, b], axis=-1).mean(-1) for a, b in pairs])  # (pairs, n, F)
+    return np.array([dist[:, i, ~m[i]].mean() for i in range(len(m))])

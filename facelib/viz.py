@@ -222,6 +222,28 @@ def figure_frames(draw, num_frames, figsize=(4, 4), dpi=80):
     return frames
 
 
+def reverse_process_frames(trace, reference, points_above=700, figsize=(5.2, 3.2), dpi=70):
+    """Frames of a reverse-process animation: for each step t of ``trace`` ({t: (x_{t-1}, x0_hat)}, one
+    sequence (F, 68, 3) each, in mm), from the largest t down, the last frame of x_{t-1} (left) and of the
+    estimate x0_hat (right), on axes fitted to ``reference`` (sequences in mm) with 10 mm to spare.  Above
+    ``points_above`` the landmarks are plain points: far from a face, x0_hat may lie far off the frame."""
+    xy = np.asarray(reference)[..., :2].reshape(-1, 2)
+    low, high = xy.min(0) - 10, xy.max(0) + 10
+    steps = sorted(trace, reverse=True)
+
+    def draw(fig, k):
+        t = steps[k]
+        for j, (points, title) in enumerate(zip(trace[t], (f"$x_{{{t - 1}}}$", r"$\hat x_0$"))):
+            ax = fig.add_subplot(1, 2, j + 1)
+            if t > points_above:
+                ax.plot(points[-1, :, 0], points[-1, :, 1], ".", ms=2)
+            else:
+                plot_landmarks(points[-1], ax=ax)
+            ax.set(xlim=(low[0], high[0]), ylim=(low[1], high[1]), xticks=[], yticks=[], xlabel="", ylabel="",
+                   title=f"{title}, step {t}")
+    return figure_frames(draw, len(steps), figsize=figsize, dpi=dpi)
+
+
 def mesh_frames(meshes, titles=None, size=(240, 300), view="front", **kwargs):
     """RGB frames of a mesh sequence (F, V, 3), or of several side by side ((S, F, V, 3))."""
     meshes = np.asarray(meshes)

@@ -20,3 +20,13 @@ def test_seam_step_is_the_motion_across_the_seam():
     both[[0, 1, 10, 11]] = True  # two seams
     assert len(metrics.seam_steps(x, both)) == 2
     assert metrics.missing_frame_error(y, x, known) == pytest.approx(2.0)
+
+
+def test_completion_spread_is_the_mean_pairwise_distance_on_the_unknown_frames():
+    known = np.array([[True, False, False]])
+    c = np.zeros((1, 3, 3, 68, 3))
+    c[0, 1, 1:] = 3.0 / np.sqrt(3)  # completion 1 is 3 mm from completions 0 and 2 on the unknown frames
+    c[0, :, 0] = 100.0  # the known frame does not count
+    assert np.isclose(metrics.completion_spread(c, known)[0], (3 + 0 + 3) / 3)
+    with pytest.raises(ValueError, match="K >= 2"):
+        metrics.completion_spread(c[:, :1], known)

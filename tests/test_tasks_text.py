@@ -51,7 +51,7 @@ def test_guided_samples_follow_the_vocabulary_match(text_head, merged_denoiser, 
 
 
 def test_contrastive_score_steers_the_order_that_the_cosine_cannot(text_head, merged_denoiser):
-    # chapter 06 section 10: on enriched sentences of both orders, the type-S IC's probability of the
+    # appendix A1 section 3: on enriched sentences of both orders, the type-S IC's probability of the
     # requested order is far higher when Alg. 2 climbs log p(c | x) than when it climbs the cosine
     # (both at the cosine's rate, and lambda 1e-4 for the contrastive score: the strong end of the sweep)
     ev = evaluation.load_evaluator("coma+bu", "S")
@@ -76,7 +76,7 @@ def test_contrastive_score_steers_the_order_that_the_cosine_cannot(text_head, me
 
 
 def test_particles_pick_the_chain_that_the_head_reads_as_the_requested_order(text_head, merged_denoiser):
-    # chapter 06 section 11: K = 4 contrastive-guided chains per sentence, the head keeps the best at
+    # appendix A1 section 4: K = 4 contrastive-guided chains per sentence, the head keeps the best at
     # t = SELECT_TIME; the type-S IC's probability of the requested order rises over one chain
     ev = evaluation.load_evaluator("coma+bu", "S")
     pairs = [(y, k) for y in ("happy", "surprise", "mouth_open", "bareteeth", "sad", "eyebrow") for k in ("N2E", "E2N")]

@@ -76,7 +76,7 @@ def test_descriptions_cover_every_label_and_keep_held_out_phrasings_apart():
 
 
 def test_written_blind_sets_keep_held_out_phrasings_held_out():
-    # chapter 06 section 12: the vocabulary (train + the first blind writer's phrasings and templates)
+    # appendix A1 section 6: the vocabulary (train + the first blind writer's phrasings and templates)
     # holds no held-out phrasing, the blind held-out set no vocabulary phrasing; what was dropped is listed
     from facelib import descriptions
     from facelib.face.expressions import ALL_LABELS
