@@ -79,19 +79,8 @@ def table1_experiment(args, name, ev, guide, denoiser):
     steps = args.steps[0]
     test = data.load_dataset(name, "test")
     n = min(args.n or len(test), len(test))
-    labels, targets = [test.label_of(i) for i in range(n)], test.targets("I")[:n]
-    models = {b: baselines.load_baseline(b, name) for b in baselines.LABEL_BASELINES}
-    generators = {
-        "Ground truth (test split)": lambda: test.landmarks[:n],
-        "Motion3DGAN-style (MoGAN)": lambda: baselines.generate(models["motion3dgan"], labels, seed=0),
-        "ACTOR-style CVAE": lambda: baselines.generate(models["actor"], labels, seed=0),
-        "DDPM, unguided": lambda: tasks.unconditional(n, steps=steps, seed=0, denoiser=denoiser, progress=False),
-        f"DDPM + mean shift (scale {args.mean_shift_scale:g})": lambda: tasks.label_control(
-            labels, n, dataset=name, steps=steps, seed=0, guide=guide, denoiser=denoiser, method="mean_shift",
-            scale=args.mean_shift_scale, progress=False),
-        "DDPM + Alg. 1 (ours)": lambda: tasks.label_control(labels, n, dataset=name, steps=steps, seed=0, guide=guide,
-                                                            denoiser=denoiser, progress=False),
-    }
+    targets = test.targets("I")[:n]
+    generators = tasks.table1_generators(name, range(n), steps, guide, denoiser, args.mean_shift_scale)
     rows = []
     for row, generate in generators.items():
         t0 = time.perf_counter()

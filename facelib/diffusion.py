@@ -212,6 +212,19 @@ class GaussianDiffusion:
         return self.run(model, torch.randn(shape, generator=generator), generator, None, guide, callback, progress,
                         mask)
 
+    def trace(self, model, shape, measures, seed=0, guide=None):
+        """:meth:`sample`, recording after every reverse step each of ``measures`` ({name: fn(t, x_{t-1}, out)
+        -> a number}, evaluated without gradients).  Returns (x_0, {"t": the time label of each x_{t-1} on the
+        paper's scale, name: the values}): how a chain gets where it goes."""
+        record = {"t": [], **{name: [] for name in measures}}
+
+        def callback(t, x, out):
+            record["t"].append(int(self.timesteps[t - 1]))
+            with torch.no_grad():
+                for name, fn in measures.items():
+                    record[name].append(fn(t, x, out))
+        return self.sample(model, shape, seed=seed, guide=guide, callback=callback, progress=False), record
+
     def run(self, model, x, seed=0, steps=None, guide=None, callback=None, progress=True, mask=None):
         """Run the chain's ``steps`` (:meth:`schedule`; None: all, from T) on x, which holds x at the first
         of them (x_T, or x_k to continue a chain or re-noised data, SDEdit); returns x after the last.

@@ -12,6 +12,7 @@
 """
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -105,3 +106,33 @@ def load_evaluator(dataset="coma", classifier_type="I", name=None):
     evaluator = Evaluator(model, dataset, classifier_type, names, np.zeros((0, len(names))))
     evaluator.reference_features = evaluator.features(data.load_dataset(dataset, "train").landmarks)
     return evaluator
+
+
+def compare(generators, evaluator, targets, num_resamples=1000):
+    """The rows of a table of methods: run each of ``generators`` ({name: callable() -> sequences (n, F, 68,
+    3) in mm}) and score its sequences with ``evaluator`` against ``targets`` (n,).  Returns {name: the
+    scores of :meth:`Evaluator.score` with their 95 % intervals, plus "seconds", the generator's wall time}
+    and {name: its sequences}."""
+    rows, outputs = {}, {}
+    for name, generate in generators.items():
+        t0 = time.perf_counter()
+        outputs[name] = generate()
+        seconds = time.perf_counter() - t0
+        rows[name] = evaluator.score(outputs[name], targets, intervals=True, num_resamples=num_resamples)
+        rows[name]["seconds"] = seconds
+    return rows, outputs
+
+
+@torch.no_grad()
+def accuracy_by_noise(classifier, denoiser, dataset, t_grid, classifier_type="I", seed=0):
+    """Accuracy (%) of a classifier of noisy sequences (the guide of Alg. 1 or 4) on ``dataset``'s sequences
+    noised to each step of ``t_grid`` with Eq. 3, one fresh draw of noise per sequence and step; the
+    classifier reads the denoiser's normalised space and the time label t."""
+    x0 = torch.as_tensor(denoiser.normalizer.normalize(dataset.landmarks))
+    y = torch.as_tensor(dataset.targets(classifier_type))
+    generator, accuracies = torch.Generator().manual_seed(seed), []
+    for t in t_grid:
+        xt = denoiser.diffusion.q_sample(x0, torch.full((len(x0),), t), generator=generator)
+        predicted = classifier(xt, torch.full((len(x0),), float(t))).argmax(1)
+        accuracies.append(100 * (predicted == y).float().mean().item())
+    return accuracies

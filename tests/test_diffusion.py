@@ -199,3 +199,13 @@ def test_bad_timesteps_and_betas():
     for bad in ([0.0, 0.1], [0.5, 1.0], [], [[0.1]]):
         with pytest.raises(ValueError, match=r"betas must be a non-empty 1-D array with values in \(0, 1\)"):
             GaussianDiffusion(bad)
+
+
+def test_trace_records_each_measure_after_every_step_and_samples_like_sample():
+    diffusion = GaussianDiffusion(linear_betas(2000)).respace(10)
+    model = lambda x, t, mask=None: torch.zeros_like(x)  # noqa: E731
+    measures = {"norm": lambda t, x, out: float(x.norm())}
+    x, record = diffusion.trace(model, (2, 3), measures, seed=4)
+    assert torch.equal(x, diffusion.sample(model, (2, 3), seed=4, progress=False))
+    assert len(record["t"]) == len(record["norm"]) == 10 and record["t"][-1] == 0
+    assert record["t"] == sorted(record["t"], reverse=True)

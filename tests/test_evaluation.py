@@ -96,3 +96,21 @@ def test_evaluator_errors():
         ev.features(np.zeros((3, 40, 60, 3)))
     with pytest.raises(ValueError, match="has classes"):
         evaluation.load_evaluator("coma", "I", name="ic_bu_I")
+
+
+def test_compare_runs_and_scores_every_generator_with_its_time():
+    ev = evaluation.load_evaluator("coma", "I")
+    test = data.load_dataset("coma", "test")
+    generators = {"GT": lambda: test.landmarks[:24], "reversed": lambda: test.landmarks[:24, ::-1]}
+    rows, outputs = evaluation.compare(generators, ev, test.targets("I")[:24], num_resamples=50)
+    assert list(rows) == ["GT", "reversed"] and np.array_equal(outputs["GT"], test.landmarks[:24])
+    assert rows["GT"]["accuracy"] == ev.score(test.landmarks[:24], test.targets("I")[:24])["accuracy"]
+    assert all(r["seconds"] >= 0 and "fid_ci" in r for r in rows.values())
+
+
+def test_a_guide_reads_clean_sequences_well_and_pure_noise_at_chance():
+    from facelib import tasks
+    test = data.load_dataset("coma", "test")
+    accuracy = evaluation.accuracy_by_noise(tasks.load_guide("coma").model, tasks.load_denoiser("denoiser_coma"),
+                                            test, [0, 2000])
+    assert accuracy[0] > 50 > 2 * 100 / 12 > accuracy[1]

@@ -48,3 +48,11 @@ def test_label_control_is_deterministic_and_beats_unguided_sampling():
     acc_guided = (ev.features(guided).argmax(1) == targets).mean()
     acc_unguided = (ev.features(unguided).argmax(1) == targets).mean()
     assert acc_guided > acc_unguided + 0.25
+
+
+def test_table1_has_the_papers_rows_for_the_requested_test_sequences(coma_test, denoiser):
+    rows = tasks.table1_generators("coma", [3, 5], 2, tasks.load_guide("coma"), denoiser, 10.0)
+    assert list(rows) == ["Ground truth (test split)", "Motion3DGAN-style (MoGAN)", "ACTOR-style CVAE",
+                          "DDPM, unguided", "DDPM + mean shift (scale 10)", "DDPM + Alg. 1 (ours)"]
+    assert np.array_equal(rows["Ground truth (test split)"](), coma_test.landmarks[[3, 5]])
+    assert rows["ACTOR-style CVAE"]().shape == rows["DDPM + Alg. 1 (ours)"]().shape == (2, 40, 68, 3)
