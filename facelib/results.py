@@ -185,7 +185,8 @@ def catalogue():
 
 
 def _plain(value):
-    """JSON-ready copy: numpy scalars and arrays become Python numbers and lists."""
+    """JSON-ready copy: numpy scalars and arrays become Python numbers and lists; floats keep 6 significant
+    digits (a setting of 1e-05 stays 1e-05, a rate of 85.2071 % stays 85.2071)."""
     if isinstance(value, dict):
         return {k: _plain(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
@@ -193,7 +194,7 @@ def _plain(value):
     if hasattr(value, "tolist"):
         return _plain(value.tolist())
     if isinstance(value, float):
-        return round(value, 4)
+        return float(f"{value:.6g}")
     return value
 
 

@@ -137,3 +137,9 @@ def test_intervals_overlap_and_rows_as_dicts(tmp_results):
     _save()
     assert results.row_dicts(results.load_result("demo")) == [
         {"method": "ours", "Acc (%)": 80.0, "95 % interval": [75.0, 85.0]}]
+
+
+def test_stored_numbers_keep_six_significant_digits_so_small_settings_survive():
+    from facelib.results import _plain
+    assert _plain({"kl_weight": 1e-05, "acc": np.float64(85.20710059), "rows": [0.000123456789]}) == \
+        {"kl_weight": 1e-05, "acc": 85.2071, "rows": [0.000123457]}
