@@ -54,11 +54,12 @@ def ranks(values, higher_is_better=True):
 
 def paper_beside_ours(paper, ours, higher_is_better=True, digits=1):
     """Rows [method, paper, ours [95 % interval], rank: paper / ours, same ordering?] for one column of a
-    paper's table.  ``paper``: {method: printed value}; ``ours``: {method: (value, interval or None)}, for
-    the paper's methods (a method of the paper that we did not reproduce gets a row saying so, and the ranks
-    are among the methods both have).  "Same ordering" compares each method's rank in the paper and here; a
-    rank that differs while our intervals of the two methods that swapped overlap is marked as not
-    separated by our data."""
+    paper's table.  ``paper``: {method: printed value} (shown with 2 decimals, as printed); ``ours``:
+    {method: (value, interval or None)} for the paper's methods (a method of the paper that we did not
+    reproduce gets a row saying so, and the ranks are among the methods both have).  "Same ordering?"
+    looks at every other method: "yes" when none swaps places with this one, "no (intervals overlap)" when
+    every swap is with a method whose interval overlaps this one's (our data cannot order the two), and
+    "**no**" otherwise."""
     extra = sorted(set(ours) - set(paper))
     if extra:
         raise ValueError(f"methods {extra} are not in the paper's table {sorted(paper)}")
@@ -68,14 +69,16 @@ def paper_beside_ours(paper, ours, higher_is_better=True, digits=1):
     rows = []
     for m in paper:
         if m not in ours:
-            rows.append([m, f"{paper[m]:.{digits}f}", "not reproduced", "", ""])
+            rows.append([m, f"{paper[m]:.2f}", "not reproduced", "", ""])
             continue
-        (value, interval), p, o = ours[m], paper_rank[m], our_rank[m]
-        swapped = [n for n in methods if our_rank[n] == p and n != m]
-        unresolved = bool(swapped) and interval is not None and ours[swapped[0]][1] is not None and \
-            metrics.intervals_overlap(interval, ours[swapped[0]][1])
-        same = "yes" if p == o else "no (intervals overlap)" if unresolved else "**no**"
-        rows.append([m, f"{paper[m]:.{digits}f}", interval_cell(value, interval, digits), f"{p} / {o}", same])
+        value, interval = ours[m]
+        swapped = [n for n in methods if n != m and
+                   (paper_rank[m] < paper_rank[n]) != (our_rank[m] < our_rank[n])]
+        unresolved = all(interval is not None and ours[n][1] is not None and
+                         metrics.intervals_overlap(interval, ours[n][1]) for n in swapped)
+        same = "yes" if not swapped else "no (intervals overlap)" if unresolved else "**no**"
+        rows.append([m, f"{paper[m]:.2f}", interval_cell(value, interval, digits),
+                     f"{paper_rank[m]} / {our_rank[m]}", same])
     return rows
 
 

@@ -51,6 +51,8 @@ def spring_and_text(head, denoiser, x0, embeddings, steps, ks, guidance_weight=0
     of a chain of ``steps`` respaced steps.  Adagrad's first step moves each coordinate by the rate in the
     sign of the sum, so the larger of the two decides it."""
     chain, rows = denoiser.diffusion_with(steps), []
+    if any(not 1 <= k <= steps for k in ks):
+        raise ValueError(f"reverse steps ks must lie in 1..{steps}, got {list(ks)}")
     for k in ks:
         xt = chain.q_sample(x0, torch.full((len(x0),), k), generator=torch.Generator().manual_seed(k))
         with torch.no_grad():
@@ -133,9 +135,12 @@ def balanced_subset(dataset, num_labels):
     one order and the orders alternating over the labels: the small sets of the text-control chapter."""
     if not 1 <= num_labels <= len(dataset.label_names):
         raise ValueError(f"num_labels must be in 1..{len(dataset.label_names)}, got {num_labels!r}")
-    chosen = range(0, len(dataset.label_names), len(dataset.label_names) // num_labels)
-    return dataset.subset(np.concatenate([np.flatnonzero((dataset.labels == k) & (dataset.kinds == i % 2))[:2]
-                                          for i, k in enumerate(chosen)]))
+    chosen = np.linspace(0, len(dataset.label_names) - 1, num_labels).round().astype(int)
+    picked = [np.flatnonzero((dataset.labels == k) & (dataset.kinds == i % 2))[:2] for i, k in enumerate(chosen)]
+    short = [dataset.label_names[k] for k, p in zip(chosen, picked) if len(p) < 2]
+    if short:
+        raise ValueError(f"fewer than 2 test sequences of the needed order for {short}")
+    return dataset.subset(np.concatenate(picked))
 
 
 def prompts_for(dataset, seed=1):
@@ -168,6 +173,9 @@ def branch_agreement(denoiser, head, encoder, dataset, evaluators, steps, branch
     with fresh noise; ``evaluators`` = (type-I IC, type-S IC) read the continuations; the head compares
     its output with the 36 sentences "from the neutral face to X" / "from X to the neutral face"."""
     ev_label, ev_order = evaluators
+    if any(not 1 <= k < steps for k in branch_at):
+        raise ValueError(f"branch points must lie in 1..{steps - 1} (x_k is stored after step k + 1), "
+                         f"got {list(branch_at)}")
     chain, states = denoiser.diffusion_with(steps), {}
     chain.sample(denoiser.model, (num_chains, *dataset.landmarks.shape[1:]), seed=seed, progress=False,
                  callback=lambda t, x, out: states.__setitem__(t - 1, x.clone()))

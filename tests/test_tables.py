@@ -38,6 +38,13 @@ def test_paper_beside_ours_says_where_the_ordering_holds_and_where_our_intervals
     swapped = tables.paper_beside_ours(printed, {"GT": (80, (76, 84)), "baseline": (50, (45, 55)),
                                                  "ours": (83, (80, 87))})
     assert [r[-1] for r in swapped] == ["no (intervals overlap)", "yes", "no (intervals overlap)"]
+    # a swap is judged against the method it swapped with: A > B > C > D printed, B > C > D > A here
+    four = tables.paper_beside_ours({"A": 4.0, "B": 3.0, "C": 2.0, "D": 1.0},
+                                    {"A": (1, (0, 2)), "B": (9, (8, 10)), "C": (7, (6, 8.5)), "D": (5, (4, 6))})
+    assert [r[-1] for r in four] == ["**no**", "**no**", "**no**", "**no**"]
+    close = tables.paper_beside_ours({"A": 4.0, "B": 3.0, "C": 2.0},
+                                     {"A": (5, (4, 7)), "B": (6, (5, 8)), "C": (1, (0, 2))})
+    assert [r[-1] for r in close] == ["no (intervals overlap)", "no (intervals overlap)", "yes"]
     apart = tables.paper_beside_ours(printed, {"GT": (60, (55, 65)), "baseline": (50, (45, 55)),
                                                "ours": (83, (80, 87))})
     assert apart[0][-1] == "**no**"
@@ -45,6 +52,7 @@ def test_paper_beside_ours_says_where_the_ordering_holds_and_where_our_intervals
         tables.paper_beside_ours(printed, {"GT": (1, None), "other": (2, None)})
     partial = tables.paper_beside_ours(printed, {"GT": (88, (84, 91)), "ours": (83, (80, 87))})
     assert partial[1][2:] == ["not reproduced", "", ""] and partial[2][3:] == ["2 / 2", "yes"]
+    assert partial[0][1] == "86.00"  # the paper's value as printed, two decimals
 
 
 def test_the_paper_tables_have_every_column_for_every_method():
