@@ -23,7 +23,7 @@ from pathlib import Path
 
 import torch
 
-from . import config
+from . import config, tables
 from .checkpoints import checkpoint_paths
 
 RESULTS_DIR = config.PROJECT_ROOT / "results"
@@ -222,9 +222,7 @@ def markdown_table(record, fmt="{:.2f}"):
     head = (f"*Stored result* `results/{record['name']}.json`: {record['title']} (n = {record['n']}, "
             f"{record['wall_time_s'] / 60:.0f} min on {record['cores']} cores with {record['torch_threads']} "
             f"torch thread(s), {record['date']}; re-run: `{record['command']}`)\n\n")
-    lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
-    lines += ["| " + " | ".join(row) + " |" for row in rows]
-    return head + "\n".join(lines)
+    return head + tables.markdown(columns, rows)
 
 
 def _is_interval(v):
