@@ -75,7 +75,7 @@ def landmark_statistics(sequences):
 def frechet_distance(features_a, features_b):
     """Fréchet distance between Gaussians fitted to two feature sets (n, d) (the FID of Heusel et
     al. 2017): ||mu_a - mu_b||^2 + tr(C_a + C_b - 2 (C_a C_b)^(1/2)).  The paper (§5) feeds it the
-    output of the IC's linear layer (:meth:`IndependentClassifier.forward`)."""
+    output of the IC's linear layer, the class logits (:meth:`facelib.evaluation.Evaluator.features`)."""
     a, b = (np.asarray(f, dtype=np.float64) for f in (features_a, features_b))
     if a.ndim != 2 or b.ndim != 2 or a.shape[1] != b.shape[1]:
         raise ValueError(f"features must be two (n, d) arrays with the same d, got {a.shape} and {b.shape}")
