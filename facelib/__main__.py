@@ -32,6 +32,7 @@ def _data(args):
             status |= not same
         print()
     if args.write_fingerprints:
+        data.FINGERPRINT_FILE.parent.mkdir(parents=True, exist_ok=True)
         data.FINGERPRINT_FILE.write_text(json.dumps(fingerprints, indent=2, sort_keys=True) + "\n")
         data.CONFIG_FILE.write_text(json.dumps(data.generator_config(), indent=2) + "\n")
         print(f"wrote {data.FINGERPRINT_FILE} and {data.CONFIG_FILE}")
@@ -44,7 +45,7 @@ TRAINABLE = ("denoiser", "guide", "text_head", "evaluator", "motion3dgan", "acto
 
 def _train(args):
     if args.name == "all":
-        training.train_all(args.only, fast=args.fast, out_dir=args.out)
+        training.train_all(args.only, fast=args.fast, out_dir=args.out, missing=args.missing, resume=args.resume)
         return 0
     given = {"dataset": args.dataset, "classifier_type": args.type, "method": args.method, "split": args.split,
              "steps": args.steps, "batch_size": args.batch_size, "seed": args.seed,
@@ -146,8 +147,10 @@ def main(argv=None):
     p.add_argument("--seed", type=int, default=None, help="default: the recipe's (0)")
     p.add_argument("--device", default=None, choices=["cpu", "cuda"], help="default: a GPU when torch sees one")
     p.add_argument("--resume", action="store_true", help="continue from <out>.state.pt if a run left one "
-                   "(the state is written every 500 steps)")
+                   "(the state is written every 500 steps; train all: each checkpoint's)")
     p.add_argument("--only", nargs="+", default=None, help="train all: only these shipped checkpoints")
+    p.add_argument("--missing", action="store_true", help="train all: skip the checkpoints that exist and were "
+                   "trained on this world (FACELIB_WORLD)")
     p.add_argument("--out", default=None, help="checkpoint name or path stem (default: denoiser_<dataset>[_var], "
                    "guide_<dataset>_<type>, ic_<dataset>_<type>, deform_<method>_<split>, <baseline>_<dataset>); "
                    "train all: a folder (default data/checkpoints)")

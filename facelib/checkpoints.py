@@ -28,12 +28,34 @@ def checkpoint_paths(name):
     return stem.with_suffix(".pt"), stem.with_suffix(".json")
 
 
+def world_fingerprint():
+    """The synthetic world this process builds: {"version": config.WORLD, "fingerprint": the first 12 hex
+    digits of the sha256 of its committed dataset fingerprints (data/synthetic[/worldN]/fingerprints.json)}."""
+    path = config.SYNTHETIC_DIR / "fingerprints.json"
+    digest = hashlib.sha256(path.read_bytes()).hexdigest()[:12] if path.exists() else None
+    return {"version": config.WORLD, "fingerprint": digest}
+
+
+def check_world(meta, name):
+    """A checkpoint's metadata must name the world of this process (world 1's checkpoints predate the
+    record and name none); a clear error naming both worlds and the retrain command if not."""
+    recorded = meta.get("world", {"version": 1, "fingerprint": None})
+    current = world_fingerprint()
+    stale = recorded["version"] != current["version"] or None not in (recorded["fingerprint"], current["fingerprint"]) \
+        and recorded["fingerprint"] != current["fingerprint"]
+    if stale:
+        raise ValueError(f"checkpoint {name} was trained on world {recorded['version']} (fingerprint "
+                         f"{recorded['fingerprint']}), but this process builds world {current['version']} (fingerprint "
+                         f"{current['fingerprint']}); retrain it: `python -m facelib train all --only {Path(name).stem}`"
+                         f" (FACELIB_WORLD selects the world)")
+
+
 def save_checkpoint(name, model, kind, model_config, **metadata):
-    """Write ``name``.pt (state_dict) and ``name``.json (kind, config, sha256, metadata)."""
+    """Write ``name``.pt (state_dict) and ``name``.json (kind, config, sha256, world, metadata)."""
     pt, js = checkpoint_paths(name)
     pt.parent.mkdir(parents=True, exist_ok=True)
     torch.save({k: v.detach().cpu() for k, v in model.state_dict().items()}, pt)
-    meta = {"kind": kind, "config": model_config, "sha256": _sha256(pt), **metadata}
+    meta = {"kind": kind, "config": model_config, "sha256": _sha256(pt), "world": world_fingerprint(), **metadata}
     js.write_text(json.dumps(meta, indent=1) + "\n")
     return pt, js
 
@@ -42,13 +64,14 @@ def load_checkpoint(name, kind, build):
     """Load a checkpoint: verify its sha256 and kind, build the model with ``build(config)``.
 
     Returns (model in eval mode, metadata dict).  Raises FileNotFoundError if it is missing and
-    ValueError if it is corrupted, of another kind, or does not fit the architecture.
+    ValueError if it is corrupted, of another world or kind, or does not fit the architecture.
     """
     pt, js = checkpoint_paths(name)
     if not pt.exists() or not js.exists():
         raise FileNotFoundError(f"checkpoint {pt.with_suffix('')} not found (need both .pt and .json); "
                                 f"train it with `python -m facelib train ...`")
     meta = json.loads(js.read_text())
+    check_world(meta, pt.name)
     if meta.get("kind") != kind:
         raise ValueError(f"checkpoint {pt.name} is a {meta.get('kind')!r} checkpoint, expected {kind!r}")
     actual = _sha256(pt)

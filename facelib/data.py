@@ -33,7 +33,7 @@ from .face.sequences import Timing, check_num_frames
 LABEL_SETS = {"coma": COMA_LABELS, "bu": BU_LABELS}
 TIMING = Timing()
 APEX_SCALE = (0.75, 1.1)  # our choice: per-take variation of the whole expression's intensity
-_SOURCE_FILES = ("face/template.py", "face/identity.py", "face/aus.py", "face/expressions.py",
+_SOURCE_FILES = ("face/template.py", "face/identity.py", "face/aus.py", "face/tissue.py", "face/expressions.py",
                  "face/sequences.py", "data.py", "config.py")
 
 
@@ -86,7 +86,7 @@ def _check_length(num_frames):
 def generator_fingerprint(spec, num_frames):
     """Hash of everything that determines a dataset: spec, length, timing and generator source."""
     h = hashlib.sha256()
-    h.update(json.dumps([asdict(spec), num_frames, asdict(TIMING), APEX_SCALE], sort_keys=True).encode())
+    h.update(json.dumps([config.WORLD, asdict(spec), num_frames, asdict(TIMING), APEX_SCALE], sort_keys=True).encode())
     root = Path(__file__).parent
     for rel in _SOURCE_FILES:
         h.update((root / rel).read_bytes())
@@ -189,7 +189,7 @@ def cache_path(name, num_frames=40, cache_dir=None):
     spec = generated_spec(name)
     num_frames = _check_length(num_frames)
     tag = f"F{num_frames}" if isinstance(num_frames, int) else f"F{num_frames[0]}-{num_frames[1]}"
-    return Path(cache_dir or config.cache_dir()) / f"{name}-{tag}-{generator_fingerprint(spec, num_frames)}.npz"
+    return Path(cache_dir or config.cache_dir()) / f"{name}-world{config.WORLD}-{tag}-{generator_fingerprint(spec, num_frames)}.npz"
 
 
 def _read_verified(path):

@@ -26,7 +26,7 @@ import torch
 from . import config, tables
 from .checkpoints import checkpoint_paths
 
-RESULTS_DIR = config.PROJECT_ROOT / "results"
+RESULTS_DIR = config.RESULTS_DIR
 SCHEMA = 1
 # Every stored result has these keys (and nothing is optional): the table and its provenance.
 FIELDS = {

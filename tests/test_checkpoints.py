@@ -1,8 +1,14 @@
 """Checkpoints: weights + JSON config, sha256 and architecture checked."""
+import json
+import os
+import subprocess
+import sys
+
 import pytest
 import torch
 
-from facelib.checkpoints import load_checkpoint, save_checkpoint
+from facelib import config
+from facelib.checkpoints import load_checkpoint, save_checkpoint, world_fingerprint
 from facelib.models.denoiser import Denoiser, DenoiserConfig
 
 
@@ -31,3 +37,36 @@ def test_checkpoint_roundtrip_and_errors(tmp_path):
         load_checkpoint(stem, "denoiser", build)
     with pytest.raises(FileNotFoundError, match="not found"):
         load_checkpoint(tmp_path / "missing", "denoiser", build)
+
+
+def _with_world(stem, world):
+    js = stem.with_suffix(".json")
+    meta = json.loads(js.read_text())
+    meta["world"] = world
+    js.write_text(json.dumps(meta))
+
+
+def test_a_checkpoint_of_another_world_is_refused_naming_both_worlds_and_the_retrain_command(tmp_path):
+    stem = tmp_path / "tiny"
+    save_checkpoint(stem, Denoiser(SMALL), "denoiser", SMALL.__dict__)
+    build = lambda c: Denoiser(DenoiserConfig(**c))  # noqa: E731
+    here = world_fingerprint()
+    assert json.loads(stem.with_suffix(".json").read_text())["world"] == here
+    other = 2 if config.WORLD == 1 else 1
+    _with_world(stem, {"version": other, "fingerprint": "0123456789ab"})
+    with pytest.raises(ValueError, match=rf"trained on world {other} .*builds world {config.WORLD}.*train all --only tiny"):
+        load_checkpoint(stem, "denoiser", build)
+    _with_world(stem, {"version": config.WORLD, "fingerprint": "0123456789ab"})  # same version, other datasets
+    with pytest.raises(ValueError, match="fingerprint 0123456789ab"):
+        load_checkpoint(stem, "denoiser", build)
+    _with_world(stem, here)
+    load_checkpoint(stem, "denoiser", build)
+
+
+def test_the_world_is_chosen_by_facelib_world_and_a_bad_value_is_a_clear_error():
+    run = lambda value: subprocess.run(  # noqa: E731
+        [sys.executable, "-c", "from facelib import config; print(config.WORLD, config.CHECKPOINT_DIR.name)"],
+        env={**os.environ, "FACELIB_WORLD": value}, capture_output=True, text=True)
+    assert run("2").stdout.split() == ["2", "world2"]
+    bad = run("3")
+    assert bad.returncode != 0 and "FACELIB_WORLD must be one of (1, 2)" in bad.stderr

@@ -143,3 +143,14 @@ def test_train_all_writes_the_chosen_checkpoints_and_their_times(tmp_path):
     assert (tmp_path / "ic_coma_I.pt").exists() and (tmp_path / "actor_bu.json").exists()
     with pytest.raises(ValueError, match="no shipped checkpoint 'ic_coma_X'; the shipped ones: denoiser_coma"):
         training.train_all(["ic_coma_X"], fast=True, out_dir=tmp_path)
+
+
+def test_train_all_missing_skips_what_this_world_already_has_and_retrains_another_worlds(tmp_path):
+    first = training.train_all(["ic_coma_I"], fast=True, out_dir=tmp_path, progress=False)
+    assert [r[0] for r in first] == ["ic_coma_I"]
+    assert training.train_all(["ic_coma_I"], fast=True, out_dir=tmp_path, progress=False, missing=True) == []
+    js = tmp_path / "ic_coma_I.json"
+    meta = json.loads(js.read_text())
+    js.write_text(json.dumps({**meta, "world": {"version": 3 - config.WORLD, "fingerprint": None}}))
+    again = training.train_all(["ic_coma_I"], fast=True, out_dir=tmp_path, progress=False, missing=True)
+    assert [r[0] for r in again] == ["ic_coma_I"]

@@ -18,13 +18,15 @@ projections a_a, d_a, e_a are fixed random vectors of this world (seed ``WORLD_S
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 
 import numpy as np
 
+from .. import config
 from . import template as tpl
-from .identity import NUM_MODES, neutral_vertices, _as_coeffs
+from . import tissue
+from .identity import NUM_MODES, depth_gains, neutral_vertices, _as_coeffs
 from .template import MOUTH_Y, bump, smoothstep
 
 WORLD_SEED = 4_2023  # fixed constants of the synthetic world (projections of identity space)
@@ -123,9 +125,13 @@ def jaw_weight(canonical):
     return lower * (1.0 - 0.6 * smoothstep((np.abs(x) - 35.0) / 30.0) * smoothstep((y + 75.0) / 30.0))
 
 
+SELF_CORRECTIVES = tissue.self_correctives(Region)  # world 2 only
+VOLUME_REGIONS = tissue.volume_regions(Region)  # world 2 only
+
+
 def _world_projections():
     rng = np.random.default_rng(WORLD_SEED)
-    names = list(AU_NAMES) + [f"{a}+{b}" for a, b in CORRECTIVES]
+    names = list(AU_NAMES) + [f"{a}+{b}" for a, b in CORRECTIVES] + [f"{a}+{b}" for a, b in SELF_CORRECTIVES]
     proj = rng.standard_normal((len(names), 4, NUM_MODES)) / np.sqrt(NUM_MODES) * 1.3
     return dict(zip(names, proj))
 
@@ -182,8 +188,11 @@ def _field(regions, canonical, neutral, normals, s, key, corner_target=None):
     return out
 
 
-def blink_field(canonical, neutral, s):
-    """AU45: the upper lid slides down onto the lower lid; the eye opening collapses."""
+def blink_field(canonical, neutral, s, meet=(0.25, 0.2)):
+    """AU45: the upper lid slides down onto the lower lid; the eye opening collapses.
+
+    The lids meet at a fraction ``meet[0] + meet[1] p`` of the opening above the lower lid, p in
+    (-1, 1) depending on the identity (world 2: tissue.BLINK_MEET, lower, as measured)."""
     x, y = canonical[:, 0], canonical[:, 1]
     upper, lower = tpl.eye_lids(x)
     inside_x = np.isfinite(upper)
@@ -196,7 +205,7 @@ def blink_field(canonical, neutral, s):
     # The lids meet at a fraction of the opening that depends on the identity (some people
     # close by dropping the upper lid only, others also raise the lower one).
     p = np.tanh(_PROJECTIONS["AU45"] @ s)
-    meet = lower + (0.25 + 0.2 * p[0]) * (upper - lower)
+    meet = lower + (meet[0] + meet[1] * p[0]) * (upper - lower)
     down = -(np.minimum(y, upper) - meet) * frac * across
     up = (meet - y) * np.clip((y - (lower - 4.0)) / 4.0, 0.0, 1.0) * (y <= lower) * across
     out = np.zeros_like(neutral)
@@ -225,9 +234,12 @@ class Face:
 
     coeffs: np.ndarray
     template: tpl.Template = field(default_factory=tpl.get_template, repr=False)
+    world: int = field(default=config.WORLD, repr=False)  # 2: with facelib/face/tissue.py
 
     def __post_init__(self):
         self.coeffs = _as_coeffs(self.coeffs)
+        if self.world not in config.WORLDS:
+            raise ValueError(f"world must be one of {config.WORLDS}, got {self.world!r}")
 
     @cached_property
     def neutral(self):
@@ -243,25 +255,46 @@ class Face:
     def basis(self):
         """Stylized blendshapes (NUM_AUS, V, 3) in mm at intensity 1 (zero for the rotations)."""
         t, s, normals = self.template, self.coeffs, self.normals
-        # The cheekbone target of AU12, on this identity's neutral (subject's left side).
-        cheek = self.neutral[_nearest(t.canonical, 46.0, 10.0)]
+        # The target of AU12 on this identity's neutral (subject's left side): world 1 pulls to the
+        # cheekbone, world 2 to zygomaticus major's origin (tissue.AU12_ORIGIN).
+        cheek = self.neutral[_nearest(t.canonical, *((46.0, 10.0) if self.world == 1 else tissue.AU12_ORIGIN))]
+        gains = depth_gains(s)
         fields = []
         for name in AU_NAMES:
             if name in ROTATION_AUS:
                 fields.append(np.zeros_like(self.neutral))
             elif name == "AU45":
-                fields.append(blink_field(t.canonical, self.neutral, s))
+                fields.append(blink_field(t.canonical, self.neutral, s, *(() if self.world == 1 else (tissue.BLINK_MEET,))))
             else:
                 target = np.array([abs(cheek[0]), cheek[1], cheek[2]]) if name.startswith("AU12") else None
-                fields.append(_field(AU_REGIONS[name], t.canonical, self.neutral, normals, s, name, target))
+                regions = AU_REGIONS[name]
+                if self.world == 2:
+                    g = tissue.AU_GAINS.get(name, 1.0)
+                    regions = [replace(r, d=tuple(g * c for c in r.d), radial=tuple(g * c for c in r.radial))
+                               for r in regions]
+                    if target is not None:
+                        regions[0] = replace(regions[0], d=tuple(tissue.AU12_MM / np.linalg.norm(regions[0].d) * c
+                                                                 for c in regions[0].d))
+                f = _field(regions, t.canonical, self.neutral, normals, s, name, target)
+                if self.world == 2:
+                    for group, region in VOLUME_REGIONS.get(name, ()):
+                        f = f + gains[group] ** 2 * _field([region], t.canonical, self.neutral, normals, s, name)
+                fields.append(f)
         return np.stack(fields)
 
     @cached_property
     def correctives(self):
         """Corrective fields {(a, b): (V, 3)} of the interacting AU pairs."""
         t, s = self.template, self.coeffs
+        pairs = CORRECTIVES if self.world == 1 else {**CORRECTIVES, **SELF_CORRECTIVES}
         return {pair: _field(regions, t.canonical, self.neutral, self.normals, s, f"{pair[0]}+{pair[1]}")
-                for pair, regions in CORRECTIVES.items()}
+                for pair, regions in pairs.items()}
+
+    @cached_property
+    def tissue(self):
+        """World 2's per-vertex tissue quantities: (curvature (V,), lip weight (V,), lip pivot (V, 3))."""
+        return (tissue.curvature(self.neutral, self.template.faces),
+                *tissue.lip_rig(self.template.canonical, self.neutral))
 
     @cached_property
     def jaw(self):
@@ -271,7 +304,7 @@ class Face:
         the direction in which the chin travels; the angles scale by exp(0.35 tanh(.))."""
         p = np.tanh(_PROJECTIONS["AU26"] @ self.coeffs)
         q = np.tanh(_PROJECTIONS["AD30"] @ self.coeffs)
-        drop = np.deg2rad(JAW_DROP_DEG) * np.exp(0.35 * p[0])
+        drop = np.deg2rad(JAW_DROP_DEG if self.world == 1 else tissue.JAW_DROP_DEG) * np.exp(0.35 * p[0])
         side = np.deg2rad(JAW_SIDE_DEG) * np.exp(0.35 * q[0])
         pivot = JAW_PIVOT + np.array([0.0, 10.0 * p[1], 10.0 * p[2]])
         return jaw_weight(self.template.canonical), pivot, drop, side
@@ -296,14 +329,26 @@ class Face:
         return v
 
     def _deform(self, w, sel):
-        """N + sum w B + sum w w C, then the jaw rotations, at vertices ``sel`` (no mouth band)."""
-        v = self.neutral[sel] + np.einsum("...a,avc->...vc", w, self.basis[:, sel])
+        """N + sum w B + sum w w C, then the jaw rotations, at vertices ``sel`` (no mouth band).
+
+        World 2 stiffens and slides the summed displacement and rolls the lips before the jaw
+        rotates, and its jaw saturates (facelib/face/tissue.py)."""
+        d = np.einsum("...a,avc->...vc", w, self.basis[:, sel])
         for (a, b), c in self.correctives.items():
             ia, ib = AU_NAMES.index(a), AU_NAMES.index(b)
-            v = v + (w[..., ia] * w[..., ib])[..., None, None] * c[sel]
+            d = d + (w[..., ia] * w[..., ib])[..., None, None] * c[sel]
+        jaw_drop = w[..., AU_NAMES.index("AU26"), None]
+        if self.world == 1:
+            v = self.neutral[sel] + d
+        else:
+            kappa, lip_weight, lip_pivot = (q[sel] for q in self.tissue)
+            v = self.neutral[sel] + tissue.slide(tissue.stiffen(d), self.normals[sel], kappa)
+            roll = np.deg2rad(tissue.LIP_ROLL_DEG) * (w[..., AU_NAMES.index("AU23")] - w[..., AU_NAMES.index("AU18")])
+            v = tissue.roll_lips(v, roll, lip_weight, lip_pivot)
+            jaw_drop = tissue.jaw_opening(jaw_drop)
         jw, pivot, drop, side = self.jaw
         jw = jw[sel]
-        drop_angle = drop * w[..., AU_NAMES.index("AU26"), None] * jw  # (..., V)
+        drop_angle = drop * jaw_drop * jw  # (..., V)
         side_angle = side * w[..., AU_NAMES.index("AD30"), None] * jw
         rot = _rotation([0, 1, 0], side_angle) @ _rotation([1, 0, 0], drop_angle)
         return np.einsum("...ij,...j->...i", rot, v - pivot) + pivot + (drop_angle / drop)[..., None] * JAW_GLIDE

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .. import config
 from .aus import AU_NAMES, NUM_AUS
 
 COMA_LABELS = ("bareteeth", "cheeks_in", "eyebrow", "high_smile", "lips_back", "lips_up",
@@ -62,6 +63,15 @@ RECIPES = {
     "sad": Recipe(_r(AU1=(0.6, 1.0), AU4=(0.4, 0.8), AU15=(0.6, 1.0), AU17=(0.2, 0.5))),
     "surprise": Recipe(_r(AU1=(0.7, 1.0), AU2=(0.7, 1.0), AU5=(0.5, 0.9), AU25=(0.6, 1.0), AU26=(0.5, 0.9))),
 }
+# World 2 (issue 25): CoMA's subjects perform "high smile" and "mouth open" broadly, as its scans
+# show; world 1's recipes made them a polite smile and a half-open mouth.
+WORLD2_RECIPES = {
+    "high_smile": Recipe(_r(AU6=(0.7, 1.0), AU12L=(0.95, 1.2), AU12R=(0.95, 1.2), AU25=(0.3, 0.7),
+                            AU26=(0.0, 0.2))),
+    "mouth_open": Recipe(_r(AU25=(0.7, 1.0), AU26=(0.7, 1.0))),
+}
+if config.WORLD == 2:
+    RECIPES = {**RECIPES, **WORLD2_RECIPES}
 MAX_INTENSITY = 1.5  # the strongest any AU can be pushed (1 = a typical strong apex)
 LEAK_EXCLUDED = ("AD30", "AU45", "AU26")  # never leaked: signed / blink / large jaw motion
 

@@ -44,3 +44,57 @@ def identity_and_expression_spread(dataset):
         motion.append((dataset.landmarks[i, :f] - neutral[dataset.subjects[i]]).reshape(-1))
     expression = np.sqrt(np.mean(np.concatenate(motion) ** 2))
     return float(identity), float(expression)
+
+
+# Published measurements of real faces that world 2 is calibrated to (chapter 01's table):
+# measure -> (value, unit, what was measured, citation key in references.bib).
+PUBLISHED = {
+    "smile_corner_mm": (9.28, "mm", "mouth-corner excursion in a maximal smile (3D motion capture, "
+                        "12 adults)", "jorge2012facial"),
+    "smile_widening_pct": (27.0, "%", "widening of the mouth in a spontaneous smile (video)", "tarantili2005smile"),
+    "smile_angle_deg": (47.0, "deg", "direction of the corners' travel above the horizontal (video)",
+                        "tarantili2005smile"),
+    "mouth_opening_mm": (48.8, "mm", "maximal mouth opening (140 adults)", "zawawi2003mouth"),
+    "brow_raise_mm": (10.57, "mm", "eyebrow lift (3D motion capture, 12 adults)", "jorge2012facial"),
+    "eye_closure_mm": (9.09, "mm", "eyelid travel in eye closure (3D motion capture, 12 adults)",
+                       "jorge2012facial"),
+}
+# The poses that play each measure in the world (AU intensities; 1 = a strong, typical apex).
+MEASURE_POSES = {
+    "smile": {"AU6": 1.0, "AU12L": 1.0, "AU12R": 1.0},
+    "mouth_opening": {"AU25": 1.0, "AU26": 1.5},  # expressions.MAX_INTENSITY: the maximal opening
+    "brow_raise": {"AU1": 1.0, "AU2": 1.0},
+    "eye_closure": {"AU45": 1.0},
+}
+_CORNERS, _INNER_LIPS, _BROWS, _UPPER_LIDS = (48, 54), (62, 66), tuple(range(17, 27)), (37, 38, 43, 44)
+
+
+def face_measures(face):
+    """The measures of ``PUBLISHED`` on one :class:`Face` (a dict of floats, same keys and units).
+
+    Corner excursion: mean 3D displacement of the two corner landmarks.  Widening and angle: in the
+    frontal (x, y) plane, as a video sees them.  Mouth opening: the distance between the inner-lip
+    midpoints.  Brow raise: the mean upward motion of the 10 brow landmarks.  Eye closure: the mean
+    downward motion of the 4 upper-lid landmarks."""
+    rest = face.landmarks(np.zeros(len(AU_NAMES)))
+    pose = {k: face.landmarks(au_vector(**v)) for k, v in MEASURE_POSES.items()}
+    smile = pose["smile"] - rest
+    corners = list(_CORNERS)
+    width = lambda lm: abs(lm[_CORNERS[1], 0] - lm[_CORNERS[0], 0])  # noqa: E731
+    outward = np.abs(smile[corners, 0])
+    return {
+        "smile_corner_mm": float(np.linalg.norm(smile[corners], axis=1).mean()),
+        "smile_widening_pct": float(100 * (width(pose["smile"]) - width(rest)) / width(rest)),
+        "smile_angle_deg": float(np.degrees(np.arctan2(smile[corners, 1], outward)).mean()),
+        "mouth_opening_mm": float(np.linalg.norm(np.subtract(*pose["mouth_opening"][list(_INNER_LIPS)]))),
+        "brow_raise_mm": float((pose["brow_raise"] - rest)[list(_BROWS), 1].mean()),
+        "eye_closure_mm": float(-(pose["eye_closure"] - rest)[list(_UPPER_LIDS), 1].mean()),
+    }
+
+
+def world_measures(world, num_identities=40, seed=0):
+    """``face_measures`` on ``num_identities`` random identities of a world (1 or 2):
+    {measure: (median, 10th percentile, 90th percentile)}."""
+    rng = np.random.default_rng(seed)
+    rows = [face_measures(Face(sample_identity(rng), world=world)) for _ in range(num_identities)]
+    return {k: tuple(float(np.percentile([r[k] for r in rows], q)) for q in (50, 10, 90)) for k in PUBLISHED}

@@ -9,12 +9,13 @@ data parallel; see the loop's docstring).  Every setting's default is in facelib
 """
 from __future__ import annotations
 
+import json
 import time
 from dataclasses import fields, replace
 from pathlib import Path
 
 from .. import results
-from ..checkpoints import save_checkpoint
+from ..checkpoints import check_world, checkpoint_paths, save_checkpoint
 from .loop import Draws, TrainingLog, fit, is_main_process
 from .recipes import (RECIPES, SETTINGS, ActorRecipe, DeformationRecipe, DenoiserRecipe, EvaluatorRecipe, GuideRecipe,
                       LSTMFillerRecipe, Motion3DGANRecipe, MotionClipRecipe, TextHeadRecipe, swap_anatomy,
@@ -55,6 +56,18 @@ def settings_for(model_name, fast=False, **settings):
     return chosen.fast() if fast else chosen
 
 
+def trained_on_this_world(name):
+    """True if checkpoint ``name`` exists and was trained on the world this process builds."""
+    pt, js = checkpoint_paths(name)
+    if not (pt.exists() and js.exists()):
+        return False
+    try:
+        check_world(json.loads(js.read_text()), pt.name)
+    except ValueError:
+        return False
+    return True
+
+
 def save_trained(recipe, model, history, name=None):
     """Write a trained model's checkpoint (weights + JSON with its config, settings and loss curves)."""
     return save_checkpoint(name or recipe.checkpoint_name(), model, recipe.kind, recipe.model_config(model),
@@ -66,28 +79,36 @@ def train_and_save(recipe, name=None, progress=True, device=None, resume=False):
 
     Returns the checkpoint paths (.pt, .json), or None on the other ranks of a distributed run."""
     recipe = RECIPES[recipe]() if isinstance(recipe, str) else recipe
-    stem = name or recipe.checkpoint_name()
+    stem = checkpoint_paths(name or recipe.checkpoint_name())[0].with_suffix("")
     model, history = fit(recipe, progress=progress, device=device, resume_from=stem if resume else None)
-    return save_trained(recipe, model, history, name) if is_main_process() else None
+    if not is_main_process():
+        return None
+    written = save_trained(recipe, model, history, name)
+    stem.with_suffix(".state.pt").unlink(missing_ok=True)  # the run is done: its training state goes
+    return written
 
 
-def train_all(names=None, fast=False, out_dir=None, progress=True):
+def train_all(names=None, fast=False, out_dir=None, progress=True, missing=False, resume=False):
     """Retrain the shipped checkpoints ``names`` (None: all, in the order of SHIPPED) and write them to
-    data/checkpoints (or ``out_dir``).  Returns rows [name, model, steps, seconds]; a full run into
-    data/checkpoints also stores them as results/train_all.json."""
+    data/checkpoints (or ``out_dir``).  ``missing``: skip those that exist and were trained on this
+    process's world; ``resume``: continue each from the training state a stopped run left.  Returns rows
+    [name, model, steps, seconds]; a full run into data/checkpoints also stores them as results/train_all.json."""
     names = list(SHIPPED) if names is None else list(names)
     unknown = [n for n in names if n not in SHIPPED]
     if unknown:
         raise ValueError(f"no shipped checkpoint {unknown[0]!r}; the shipped ones: {', '.join(SHIPPED)}")
+    stems = {name: str(Path(out_dir) / name) if out_dir else name for name in names}
+    if missing:
+        names = [name for name in names if not trained_on_this_world(stems[name])]
     rows, t_start = [], time.perf_counter()
     for name in names:
         model, settings = SHIPPED[name]
         r = recipe(model, fast=fast, **settings)
         t0 = time.perf_counter()
-        train_and_save(r, name=str(Path(out_dir) / name) if out_dir else name, progress=progress)
+        train_and_save(r, name=stems[name], progress=progress, resume=resume and r.settings.epochs is None)
         rows.append([name, model, r.settings.epochs or r.settings.steps, time.perf_counter() - t0])
         print(f"{name}: {rows[-1][3]:.0f} s", flush=True)
-    if out_dir is None and not fast:
+    if out_dir is None and not fast and not missing:
         results.save_result("train_all", "Retraining every shipped checkpoint (python -m facelib train all)",
                             ["checkpoint", "model", "steps (epochs for the IC)", "seconds"], rows,
                             results.Run(checkpoints=names, seeds=[0], n=len(names), steps=[],

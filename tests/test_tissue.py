@@ -1,0 +1,73 @@
+"""World 2's tissue (facelib/face/tissue.py): calibrated magnitudes and the mechanics that make
+action units act nonlinearly and differently on every face."""
+import numpy as np
+import pytest
+
+from facelib.face import Face, au_vector, measures, sample_identity, tissue
+from facelib.face.identity import IDENTITY_MODES
+
+
+def test_world_2_is_within_a_factor_1_5_of_every_published_measure_and_world_1_is_not():
+    for world, expect_all in ((2, True), (1, False)):
+        ours = measures.world_measures(world, num_identities=12)
+        ratios = {k: ours[k][0] / v[0] for k, v in measures.PUBLISHED.items()}
+        within = {k: 1 / 1.5 <= r <= 1.5 for k, r in ratios.items()}
+        assert all(within.values()) == expect_all, (world, ratios)
+
+
+def test_stiffening_shrinks_large_displacements_and_keeps_small_ones():
+    d = np.array([[0.1, 0, 0], [10.0, 0, 0], [100.0, 0, 0]])
+    out = np.linalg.norm(tissue.stiffen(d), axis=1)
+    assert out[0] == pytest.approx(0.1, rel=1e-4)
+    assert out[1] < 10 and out[2] < tissue.STIFFENING_MM and np.all(np.diff(out) > 0)
+
+
+def test_the_jaw_saturates_and_is_odd():
+    w = np.array([-1.0, 0.0, 0.5, 1.0, 1.5, 10.0])
+    out = tissue.jaw_opening(w)
+    assert out[1] == 0 and out[0] == -out[3]
+    assert np.all(out[2:] < w[2:]) and out[-1] < tissue.JAW_RANGE
+
+
+def test_sliding_falls_back_along_the_normal_on_a_convex_surface_only_for_tangential_motion():
+    n = np.array([[0.0, 0, 1], [0.0, 0, 1]])
+    d = np.array([[3.0, 4.0, 0.0], [0.0, 0.0, 5.0]])  # tangential, normal
+    out = tissue.slide(d, n, np.array([0.02, 0.02]))
+    assert out[0, 2] == pytest.approx(-0.5 * 0.02 * 25) and np.allclose(out[1], d[1])
+
+
+def test_tightening_rolls_both_lips_inwards_and_pucker_outwards():
+    face = Face(sample_identity(3), world=2)
+    mid = [51, 57]  # outer upper- and lower-lip midpoints
+    rest = face.landmarks(au_vector())[mid]
+    tight = face.landmarks(au_vector(AU23=1.0))[mid] - rest
+    pucker = face.landmarks(au_vector(AU18=1.0))[mid] - rest
+    assert np.all(tight[:, 2] < 0) and np.all(pucker[:, 2] > 0)
+
+
+def test_in_world_2_an_au_is_far_from_linear_in_its_intensity_in_world_1_nearly_linear():
+    for world, linear in ((1, True), (2, False)):
+        face = Face(sample_identity(5), world=world)
+        rest = face.landmarks(au_vector())
+        half, full = (face.landmarks(au_vector(AU12L=w, AU12R=w)) - rest for w in (0.5, 1.0))
+        gap = np.abs(full - 2 * half).max()
+        assert (gap < 0.01) == linear and (gap > 0.5) != linear, (world, gap)  # mm
+
+
+def test_in_world_2_the_cheeks_bulge_with_the_faces_own_fullness():
+    coeffs = np.zeros(len(IDENTITY_MODES))
+    bulge = {}
+    for world in (1, 2):
+        for fullness in (-1.5, 1.5):
+            c = coeffs.copy()
+            c[IDENTITY_MODES.index("cheek_fullness")] = fullness
+            face = Face(c, world=world)
+            forward = (face.expression(au_vector(AU6=1.0)) - face.neutral)[:, 2]
+            bulge[world, fullness] = forward.max()
+    assert bulge[2, 1.5] > 2 * bulge[2, -1.5]
+    assert bulge[2, 1.5] / bulge[2, -1.5] > 1.5 * bulge[1, 1.5] / bulge[1, -1.5]
+
+
+def test_a_face_of_an_unknown_world_is_a_clear_error():
+    with pytest.raises(ValueError, match=r"world must be one of \(1, 2\)"):
+        Face(sample_identity(0), world=3)
