@@ -68,10 +68,11 @@ def trained_on_this_world(name):
     return True
 
 
-def save_trained(recipe, model, history, name=None):
-    """Write a trained model's checkpoint (weights + JSON with its config, settings and loss curves)."""
+def save_trained(recipe, model, history, name=None, **metadata):
+    """Write a trained model's checkpoint (weights + JSON with its config, settings, loss curves and
+    ``metadata``, e.g. the training's wall time)."""
     return save_checkpoint(name or recipe.checkpoint_name(), model, recipe.kind, recipe.model_config(model),
-                           history=history, **recipe.metadata(model))
+                           history=history, **recipe.metadata(model), **metadata)
 
 
 def train_and_save(recipe, name=None, progress=True, device=None, resume=False):
@@ -80,10 +81,13 @@ def train_and_save(recipe, name=None, progress=True, device=None, resume=False):
     Returns the checkpoint paths (.pt, .json), or None on the other ranks of a distributed run."""
     recipe = RECIPES[recipe]() if isinstance(recipe, str) else recipe
     stem = checkpoint_paths(name or recipe.checkpoint_name())[0].with_suffix("")
+    resumed = resume and stem.with_suffix(".state.pt").exists()
+    t0 = time.perf_counter()
     model, history = fit(recipe, progress=progress, device=device, resume_from=stem if resume else None)
     if not is_main_process():
         return None
-    written = save_trained(recipe, model, history, name)
+    written = save_trained(recipe, model, history, name, wall_time_s=round(time.perf_counter() - t0, 1),
+                           resumed=resumed)
     stem.with_suffix(".state.pt").unlink(missing_ok=True)  # the run is done: its training state goes
     return written
 
@@ -100,7 +104,7 @@ def train_all(names=None, fast=False, out_dir=None, progress=True, missing=False
     stems = {name: str(Path(out_dir) / name) if out_dir else name for name in names}
     if missing:
         names = [name for name in names if not trained_on_this_world(stems[name])]
-    rows, t_start = [], time.perf_counter()
+    rows = []
     for name in names:
         model, settings = SHIPPED[name]
         r = recipe(model, fast=fast, **settings)
@@ -108,10 +112,22 @@ def train_all(names=None, fast=False, out_dir=None, progress=True, missing=False
         train_and_save(r, name=stems[name], progress=progress, resume=resume and r.settings.epochs is None)
         rows.append([name, model, r.settings.epochs or r.settings.steps, time.perf_counter() - t0])
         print(f"{name}: {rows[-1][3]:.0f} s", flush=True)
-    if out_dir is None and not fast and not missing:
-        results.save_result("train_all", "Retraining every shipped checkpoint (python -m facelib train all)",
-                            ["checkpoint", "model", "steps (epochs for the IC)", "seconds"], rows,
-                            results.Run(checkpoints=names, seeds=[0], n=len(names), steps=[],
-                                        wall_time_s=time.perf_counter() - t_start,
-                                        command="python -m facelib train all"))
+    if out_dir is None and not fast and rows:
+        store_training_times()
     return rows
+
+
+def store_training_times():
+    """results/train_all.json: every shipped checkpoint of this world with its steps and the wall time
+    its checkpoint recorded (the last run's, when a stopped run was resumed)."""
+    rows = []
+    for name, (model, _) in SHIPPED.items():
+        if trained_on_this_world(name):
+            meta = json.loads(checkpoint_paths(name)[1].read_text())
+            steps = meta["training"].get("epochs") or meta["training"]["steps"]
+            rows.append([name, model, steps, meta.get("wall_time_s"), bool(meta.get("resumed", False))])
+    results.save_result("train_all", "Training every shipped checkpoint (python -m facelib train all)",
+                        ["checkpoint", "model", "steps (epochs for the IC)", "seconds", "resumed"], rows,
+                        results.Run(checkpoints=[r[0] for r in rows], seeds=[0], n=len(rows), steps=[],
+                                    wall_time_s=sum(r[3] or 0.0 for r in rows), command="python -m facelib train all"),
+                        notes="seconds: the wall time recorded in each checkpoint (None: trained before it was recorded)")

@@ -296,7 +296,7 @@ class ActorRecipe(_BaselineRecipe):
         self.size = len(self.delta)
 
     def build(self, generator):
-        model = actor.ActorCVAE(actor.ActorConfig(num_classes=len(self.train.label_names),
+        model = actor.ActorCVAE(actor.ActorConfig(num_classes=len(self.train.label_names), depth=self.settings.depth,
                                                   num_neutrals=len(np.unique(self.train.subjects))))
         model.scale.fill_(float(self.delta.std()))
         model.neutrals.copy_(torch.as_tensor(self.train.subject_neutrals()))
@@ -355,7 +355,8 @@ class Motion3DGANRecipe(_BaselineRecipe):
 
     def build(self, generator):
         k, train = self.num_classes, self.train
-        config_ = motion3dgan.Motion3DGANConfig(num_classes=k, num_frames=train.landmarks.shape[1])
+        config_ = motion3dgan.Motion3DGANConfig(num_classes=k, num_frames=train.landmarks.shape[1],
+                                                channels=self.settings.channels)
         model = motion3dgan.Motion3DGAN(config_, num_neutrals=len(np.unique(train.subjects)))
         model.reference.copy_(self.reference.float())
         model.tangent_scale.fill_(float(self.real.std()))

@@ -6,6 +6,8 @@ that its recorded settings are these, so ``python -m facelib train all`` rebuild
 """
 from __future__ import annotations
 
+from .. import config
+
 _DEFORMER_METHODS = ("ours", "no_attention", "s2d", "coma", "linear")
 SHIPPED = {
     "denoiser_coma": ("denoiser", {}),
@@ -27,3 +29,7 @@ SHIPPED = {
     **{f"deform_{m}_{s}": ("deformer", {"method": m, "split": s}) for m in _DEFORMER_METHODS
        for s in ("identity", "expression")},
 }
+if config.WORLD == 2:
+    # Issue 25: Table 5 over three training seeds for ours, ours without attention and S2D (seed 0 is above).
+    SHIPPED.update({f"deform_{m}_{s}_seed{k}": ("deformer", {"method": m, "split": s, "seed": k})
+                    for m in ("ours", "no_attention", "s2d") for s in ("identity", "expression") for k in (1, 2)})
