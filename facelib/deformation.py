@@ -76,16 +76,18 @@ class Pairs:
     delta_mesh: np.ndarray  # (n, K, V, 3) Delta M_f, the target
     frames: np.ndarray  # (n, K) which frames of the sequence
     labels: np.ndarray  # (n,)
+    subjects: np.ndarray  # (n,) the dataset's subject of each sequence (its face)
 
     def __len__(self):
         return len(self.neutral)
 
 
-def make_pairs(dataset, frames_per_sequence=10, seed=None):
+def make_pairs(dataset, frames_per_sequence=10, seed=None, noise_free=False):
     """Pairs of every sequence of ``dataset``: ``frames_per_sequence`` frames, evenly spaced when
-    ``seed`` is None (evaluation), else drawn at random without replacement (training)."""
+    ``seed`` is None (evaluation), else drawn at random without replacement (training).
+    ``noise_free``: Delta L_f from the world's exact landmarks instead of the captured (noisy) ones."""
     rng = None if seed is None else np.random.default_rng(seed)
-    delta_l = dataset.delta_landmarks()
+    delta_l = dataset.delta_landmarks() if not noise_free else None
     neutral, dl, dm, frames = [], [], [], []
     for i in range(len(dataset)):
         length = int(dataset.lengths[i])
@@ -95,10 +97,15 @@ def make_pairs(dataset, frames_per_sequence=10, seed=None):
         face = dataset.face(int(dataset.subjects[i]))
         m = face.neutral.astype(np.float32)
         neutral.append(m)
-        dl.append(delta_l[i, f])
+        if noise_free:
+            w = dataset.au_weights[i, f].astype(np.float64)
+            dl.append((face.landmarks(w) - face.landmarks(np.zeros_like(w[0]))).astype(np.float32))
+        else:
+            dl.append(delta_l[i, f])
         dm.append(face.expression(dataset.au_weights[i, f].astype(np.float64)).astype(np.float32) - m)
         frames.append(f)
-    return Pairs(np.stack(neutral), np.stack(dl), np.stack(dm), np.stack(frames), dataset.labels.copy())
+    return Pairs(np.stack(neutral), np.stack(dl), np.stack(dm), np.stack(frames), dataset.labels.copy(),
+                 dataset.subjects.copy())
 
 
 def build_model(method):
@@ -179,3 +186,61 @@ def deform(neutral_vertices, landmark_sequence, model=None):
     with torch.no_grad():
         dm = model(torch.as_tensor(neutral)[None], torch.as_tensor(delta)[None])[0].numpy()
     return tpl.place_mouth_band(neutral[None] + dm, tpl.get_template())
+
+
+def _motion_features(pairs):
+    """[Delta L_f, 1] of every pair frame, (n K, 205) float32."""
+    x = pairs.delta_landmarks.reshape(-1, 204)
+    return np.hstack([x, np.ones((len(x), 1), np.float32)])
+
+
+def fit_linear_regression(pairs, penalty=1e-2):
+    """The closed-form reference row of Table 5: the ridge regression Delta M_f ~ A Delta L_f + b over
+    every training pair frame, one map for every face.  Returns the coefficients (205, V 3)."""
+    x = _motion_features(pairs).astype(np.float64)
+    y = pairs.delta_mesh.reshape(len(x), -1)
+    return np.linalg.solve(x.T @ x + penalty * np.eye(x.shape[1]), (x.T.astype(np.float32) @ y).astype(np.float64))
+
+
+def linear_regression_errors(coefficients, pairs):
+    """Per-vertex Euclidean errors (n, K, V) in mm of :func:`fit_linear_regression`'s map on ``pairs``."""
+    predicted = (_motion_features(pairs) @ coefficients.astype(np.float32)).reshape(pairs.delta_mesh.shape)
+    return np.linalg.norm(predicted - pairs.delta_mesh, axis=-1)
+
+
+def attention_entropy(model, pairs, batch_sequences=8):
+    """Entropy (nats) of the attention weights of Eq. 11 for every pair frame, (n, K); uniform weights
+    over the coarse vertices give log(num_coarse), one vertex only gives 0."""
+    if not model.config.attention:
+        raise ValueError("this deformer has no attention (it averages F_e: 'ours without attention')")
+    out = []
+    with torch.no_grad():
+        for s in range(0, len(pairs), batch_sequences):
+            sl = slice(s, s + batch_sequences)
+            features = model.encode(torch.as_tensor(pairs.neutral[sl]))
+            _, w = model.attend(features, torch.as_tensor(pairs.delta_landmarks[sl]) / model.config.scale)
+            out.append(-(w * torch.log(w.clamp_min(1e-30))).sum(-1).numpy())
+    return np.concatenate(out)
+
+
+def per_face(errors, subjects):
+    """Mean error per test face: (faces (m,), means (m,)) from per-vertex errors (n, K, V) and the
+    subject (n,) of each pair."""
+    faces = np.unique(subjects)
+    return faces, np.array([errors[subjects == f].mean() for f in faces])
+
+
+def paired_difference(errors, reference, subjects, num_resamples=1000, seed=0):
+    """Mean error of ``errors`` minus that of ``reference`` (both (n, K, V) on the same pairs) with a 95 %
+    bootstrap interval over the test faces, resampled together (paired): (difference, (low, high))."""
+    _, a = per_face(errors, subjects)
+    _, b = per_face(reference, subjects)
+    diff = a - b
+    return float(diff.mean()), metrics.bootstrap_interval(np.mean, diff, num_resamples=num_resamples, seed=seed)
+
+
+def over_seeds(means):
+    """A Table 5 cell over training seeds: (mean, std with ddof 1; 0 for a single seed) of the seeds' means."""
+    m = np.asarray(means, dtype=np.float64)
+    return float(m.mean()), float(m.std(ddof=1)) if len(m) > 1 else 0.0
+

@@ -143,3 +143,42 @@ def test_a_checkpoint_of_another_method_is_refused():
     for other in ("s2d", "linear"):  # the same network class, and another one
         with pytest.raises(ValueError, match=f"holds method 'ours', not '{other}'"):
             deformation.load_deformer(other, checkpoint="deform_ours_identity")
+
+
+def test_noise_free_pairs_are_the_worlds_exact_landmarks_and_captured_ones_differ_by_the_capture_noise(test_pairs):
+    _, test = deformation.split_datasets("identity")
+    exact = deformation.make_pairs(test.subset(np.arange(0, len(test), 40)), frames_per_sequence=5, noise_free=True)
+    np.testing.assert_array_equal(exact.delta_mesh, test_pairs.delta_mesh)
+    noise = (test_pairs.delta_landmarks - exact.delta_landmarks).std()
+    assert 0.15 < noise < 0.25  # Timing.noise_mm = 0.2
+    np.testing.assert_array_equal(exact.subjects, test_pairs.subjects)
+
+
+def test_the_closed_form_regression_recovers_an_exactly_linear_world(test_pairs):
+    rng = np.random.default_rng(0)
+    truth = rng.standard_normal((205, V * 3)).astype(np.float32) * 0.01
+    fake = deformation.Pairs(test_pairs.neutral, test_pairs.delta_landmarks, None, test_pairs.frames,
+                             test_pairs.labels, test_pairs.subjects)
+    fake.delta_mesh = (deformation._motion_features(fake) @ truth).reshape(*fake.delta_landmarks.shape[:2], V, 3)
+    coef = deformation.fit_linear_regression(fake, penalty=1e-6)
+    assert deformation.linear_regression_errors(coef, fake).max() < 1e-3
+
+
+def test_attention_entropy_is_between_zero_and_uniform_and_refused_without_attention(test_pairs):
+    torch.manual_seed(0)
+    model = deformation.build_model("ours").eval()
+    h = deformation.attention_entropy(model, test_pairs)
+    assert h.shape == test_pairs.delta_landmarks.shape[:2]
+    assert np.all(h >= 0) and np.all(h <= np.log(model.num_coarse) + 1e-5)
+    with pytest.raises(ValueError, match="has no attention"):
+        deformation.attention_entropy(deformation.build_model("no_attention"), test_pairs)
+
+
+def test_paired_differences_are_taken_per_face_and_seed_summaries_use_the_sample_std():
+    subjects = np.array([0, 0, 1, 1, 2, 2])
+    a = np.ones((6, 2, 3)) * np.array([1, 1, 2, 2, 3, 3])[:, None, None]
+    faces, means = deformation.per_face(a, subjects)
+    assert faces.tolist() == [0, 1, 2] and means.tolist() == [1, 2, 3]
+    diff, (low, high) = deformation.paired_difference(a + 0.5, a, subjects)
+    assert diff == pytest.approx(0.5) and low == pytest.approx(0.5) and high == pytest.approx(0.5)
+    assert deformation.over_seeds([1.0, 2.0, 3.0]) == (2.0, 1.0) and deformation.over_seeds([4.0]) == (4.0, 0.0)
