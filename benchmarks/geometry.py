@@ -32,17 +32,6 @@ COLUMNS = ["method", "pass", "Acc (%)", "Acc 95 % interval", "FID", "FID 95 % in
            "diversity 95 % interval", "step from the given frame, median (mm/frame)", "seconds"]
 
 
-def table4_inputs(test, ev, per_class=None):
-    """Rows of the test split (``per_class`` per type-S class, None: all), their labels, neutral frames and
-    known-frame masks (frame 1 for N2E, frame F for E2N)."""
-    targets = test.targets("S")
-    rows = np.concatenate([np.flatnonzero(targets == c)[:per_class] for c in range(len(ev.class_names))])
-    labels = [ev.class_names[c] for c in targets[rows]]
-    known = np.zeros((len(rows), test.landmarks.shape[1]), bool)
-    known[np.arange(len(rows)), [0 if lab.endswith("N2E") else -1 for lab in labels]] = True
-    return rows, labels, test.sequence_neutrals()[rows], known
-
-
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--per-class", type=int, default=None, help="test sequences per type-S class (default: all)")
@@ -55,7 +44,7 @@ def main():
     ev = evaluation.load_evaluator("coma", "S")
     denoiser, guide = tasks.load_denoiser("denoiser_coma"), tasks.load_guide("coma", "S")
     test = data.load_dataset("coma", "test")
-    rows_sel, labels, neutral, known = table4_inputs(test, ev, args.per_class)
+    rows_sel, labels, neutral, known = tasks.table4_inputs(test, ev.class_names, args.per_class)
     truth, targets = test.landmarks[rows_sel], test.targets("S")[rows_sel]
     print(f"cores: {os.cpu_count()}, torch threads: {torch.get_num_threads()}, n = {len(rows_sel)}, "
           f"steps {args.steps} per pass, {args.passes} passes, zeta = {args.reconstruction_scale:g}")

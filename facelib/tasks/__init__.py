@@ -14,13 +14,13 @@ printed algorithm, ``.fast()`` a few steps) and ``overrides`` change single fiel
 """
 from .decoder import decoder_then_diffusion
 from .fill import fill
-from .geometry import geometry_adaptive, geometry_passes, order_sensitive_label
+from .geometry import geometry_adaptive, geometry_passes, order_sensitive_label, table4_inputs
 from .label import adagrad_lr, label_control, step_scaled_lr, table1_generators
 from .loading import TrainedDenoiser, TrainedGuide, check_same_space, load_denoiser, load_guide, load_text_head
 from .text import text_control, text_guidance_weight, text_lr, text_score
 from .unconditional import unconditional
 
-__all__ = ["decoder_then_diffusion", "table1_generators", "fill", "geometry_adaptive", "geometry_passes", "order_sensitive_label",
+__all__ = ["decoder_then_diffusion", "table1_generators", "fill", "geometry_adaptive", "geometry_passes", "order_sensitive_label", "table4_inputs",
            "adagrad_lr", "label_control", "step_scaled_lr", "TrainedDenoiser", "TrainedGuide", "check_same_space",
            "load_denoiser", "load_guide", "load_text_head", "text_control", "text_guidance_weight", "text_lr",
            "text_score", "unconditional"]
