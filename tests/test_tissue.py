@@ -71,3 +71,11 @@ def test_in_world_2_the_cheeks_bulge_with_the_faces_own_fullness():
 def test_a_face_of_an_unknown_world_is_a_clear_error():
     with pytest.raises(ValueError, match=r"world must be one of \(1, 2\)"):
         Face(sample_identity(0), world=3)
+
+
+def test_the_calibration_table_has_a_row_per_published_measure_with_each_worlds_ratio():
+    rows = measures.calibration_rows(worlds=(1, 2), num_identities=4)
+    assert len(rows) == len(measures.PUBLISHED) and all(len(r) == 3 + 2 * 3 for r in rows)
+    for r in rows:
+        assert r[5] == pytest.approx(r[3] / r[1]) and r[8] == pytest.approx(r[6] / r[1])
+        assert r[4][0] <= r[3] <= r[4][1]

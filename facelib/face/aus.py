@@ -15,6 +15,9 @@ with a displacement vector.  For identity s, the amplitude is scaled by exp(0.3 
 the vector is rotated by up to ~0.45 rad (tanh(d_a . s)), the region centre moves by up to 3 mm
 (tanh(e_a . s)), and AU12 pulls the lip corner towards the identity's own cheekbone.  The
 projections a_a, d_a, e_a are fixed random vectors of this world (seed ``WORLD_SEED``).
+
+World 2 (``Face(..., world=2)``, issue 25) keeps this skeleton and adds tissue mechanics and calibrated
+magnitudes: see :mod:`facelib.face.tissue`.
 """
 from __future__ import annotations
 

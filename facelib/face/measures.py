@@ -98,3 +98,18 @@ def world_measures(world, num_identities=40, seed=0):
     rng = np.random.default_rng(seed)
     rows = [face_measures(Face(sample_identity(rng), world=world)) for _ in range(num_identities)]
     return {k: tuple(float(np.percentile([r[k] for r in rows], q)) for q in (50, 10, 90)) for k in PUBLISHED}
+
+
+def calibration_rows(worlds=(2,), num_identities=40):
+    """Chapter 01's table: [measure, published value, source, then per world its median [10th, 90th
+    percentile] and the ratio median / published] for every measure of ``PUBLISHED``."""
+    ours = {w: world_measures(w, num_identities) for w in worlds}
+    rows = []
+    for key, (value, unit, what, source) in PUBLISHED.items():
+        row = [f"{what} ({unit})", value, source]
+        for w in worlds:
+            median, low, high = ours[w][key]
+            row += [median, [low, high], median / value]
+        rows.append(row)
+    return rows
+
