@@ -296,7 +296,7 @@ class Face:
     @cached_property
     def tissue(self):
         """World 2's per-vertex tissue quantities: (curvature (V,), lip weight (V,), lip pivot (V, 3))."""
-        return (tissue.curvature(self.neutral, self.template.faces),
+        return (tissue.curvature(self.neutral, self.template.faces, self.normals),
                 *tissue.lip_rig(self.template.canonical, self.neutral))
 
     @cached_property

@@ -81,12 +81,11 @@ def slide(d, normals, curvature):
     return d - 0.5 * curvature[:, None] * dt2 * normals
 
 
-def curvature(vertices, faces):
+def curvature(vertices, faces, normals):
     """Signed curvature (V,) in 1/mm of a mesh, positive where it is convex, at the scale of the skull:
     the umbrella operator kappa = 2 n . (v - mean of neighbours) / mean |v - neighbour|^2, clipped to
-    CURVATURE_LIMIT, then smoothed over the mesh (CURVATURE_SMOOTHING rounds of neighbour averaging)."""
-    from .aus import vertex_normals  # the one normal formula of the world
-
+    CURVATURE_LIMIT, then smoothed over the mesh (CURVATURE_SMOOTHING rounds of neighbour averaging).
+    ``normals``: the mesh's unit vertex normals (V, 3)."""
     edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
     edges = np.unique(np.sort(edges, axis=1), axis=0)
     count = np.bincount(edges.ravel(), minlength=len(vertices)).astype(float)
@@ -96,7 +95,7 @@ def curvature(vertices, faces):
     sq = np.sum((vertices[edges[:, 0]] - vertices[edges[:, 1]]) ** 2, axis=1)
     mean_sq = np.bincount(edges.ravel(), weights=np.repeat(sq, 2), minlength=len(vertices)) / count
     offset = vertices - total / count[:, None]
-    kappa = np.clip(2.0 * np.sum(offset * vertex_normals(vertices, faces), axis=1) / mean_sq,
+    kappa = np.clip(2.0 * np.sum(offset * normals, axis=1) / mean_sq,
                     -CURVATURE_LIMIT, CURVATURE_LIMIT)
     for _ in range(CURVATURE_SMOOTHING):  # the skull's curvature, not the lips' or the nose's detail
         kappa = 0.5 * kappa + 0.5 * (np.bincount(edges[:, 0], kappa[edges[:, 1]], len(kappa))
