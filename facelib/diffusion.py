@@ -15,6 +15,10 @@ float64 (numpy) and owns every closed form:
 * ``sample``, ``run``    the reverse chain from x_T ~ N(0, I), or any part of it from a given x (``schedule``)
 * ``training_loss``      E ||eps - eps_theta(x_t, t)||^2                                           (Eq. 8)
 * ``respace``            the same model on a subset of the steps (fewer steps, no retraining)
+* ``eta``                DDIM (Song et al. 2021, Eq. 12) instead of the ancestral step: the same trained model,
+                         x_{t-1} = sqrt(abar_{t-1}) x0_hat + sqrt(1 - abar_{t-1} - sigma_t^2) eps_theta + sigma_t z
+                         with sigma_t^2 = eta^2 beta~_t: deterministic at eta = 0, the DDPM posterior at eta = 1
+* ``invert``             DDIM inversion (eta = 0 run backwards): x_0 -> x_T, from which ``run`` regenerates x_0
 
 Respacing (Nichol & Dhariwal 2021; guided-diffusion's ``respace.py``): a respaced chain keeps the steps
 ``timesteps`` of the original schedule and numbers them 1..K.  Everything outside this module speaks in the
@@ -101,16 +105,21 @@ class GaussianDiffusion:
 
     variance: "beta" uses sigma_t^2 = beta_t (paper §4); "posterior" uses beta~_t.
     timesteps: the model's time label of each step (default 1..T; respacing keeps the original ones).
+    eta: None for the ancestral DDPM step (Eq. 5); a number in [0, 1] for DDIM's step with
+    sigma_t^2 = eta^2 beta~_t (``variance`` then does not apply).
     """
 
-    def __init__(self, betas, variance="beta", timesteps=None):
+    def __init__(self, betas, variance="beta", timesteps=None, eta=None):
         betas = np.asarray(betas, dtype=np.float64)
         if betas.ndim != 1 or len(betas) == 0 or not np.all((betas > 0) & (betas < 1)):
             raise ValueError("betas must be a non-empty 1-D array with values in (0, 1)")
         if variance not in VARIANCES:
             raise ValueError(f"variance must be one of {VARIANCES}, got {variance!r}")
+        if eta is not None and (isinstance(eta, bool) or not isinstance(eta, (int, float)) or not 0 <= eta <= 1):
+            raise ValueError(f"eta must be None (DDPM) or a number in [0, 1] (DDIM; 0: deterministic), got {eta!r}")
         self.num_steps = len(betas)
         self.variance = variance
+        self.eta = None if eta is None else float(eta)
         self.betas = np.concatenate([[0.0], betas])
         self.alphas = 1.0 - self.betas
         self.alphas_bar = np.cumprod(self.alphas)
@@ -124,12 +133,16 @@ class GaussianDiffusion:
             self.posterior_coef_xt = np.nan_to_num(np.sqrt(self.alphas) * (1.0 - self.alphas_bar_prev) / (1.0 - self.alphas_bar))
             # Eq. 7: mu = (x_t - eps_coef * eps) / sqrt(alpha_t), eps_coef = beta_t / sqrt(1 - abar_t).
             self.eps_coef = np.nan_to_num(self.betas / self.sqrt_one_minus_alphas_bar)
-        self.sigmas = np.sqrt(self.betas if variance == "beta" else self.posterior_variance)
+        if self.eta is not None:  # DDIM: sigma_t^2 = eta^2 (1 - abar_{t-1}) / (1 - abar_t) (1 - abar_t / abar_{t-1})
+            self.sigmas = self.eta * np.sqrt(self.posterior_variance)
+        else:
+            self.sigmas = np.sqrt(self.betas if variance == "beta" else self.posterior_variance)
         self.timesteps = np.arange(self.num_steps + 1) if timesteps is None else np.asarray(timesteps)
         self.time_labels = torch.as_tensor(self.timesteps, dtype=torch.float32)  # the networks' time of each step
 
     def __repr__(self):
-        return f"GaussianDiffusion(T={self.num_steps}, variance={self.variance!r})"
+        sampler = f"variance={self.variance!r}" if self.eta is None else f"DDIM eta={self.eta:g}"
+        return f"GaussianDiffusion(T={self.num_steps}, {sampler})"
 
     # ----------------------------------------------------------------------------- forward process
     def q_sample(self, x0, t, eps=None, generator=None):
@@ -165,11 +178,17 @@ class GaussianDiffusion:
         return TimeMapped(network, self.time_labels)
 
     def p_mean_variance(self, model, xt, t, mask=None):
-        """Mean and variance of p_theta(x_{t-1} | x_t) from eps_theta (Eq. 7, correct form), and x0_hat."""
+        """Mean and variance of p_theta(x_{t-1} | x_t) from eps_theta, and x0_hat: Eq. 7 (correct form), or
+        with ``eta`` DDIM's sqrt(abar_{t-1}) x0_hat + sqrt(1 - abar_{t-1} - sigma_t^2) eps_theta."""
         eps = self.wrap(model)(xt, t, mask)
-        mean = (xt - _extract(self.eps_coef, t, xt) * eps) / _extract(np.sqrt(self.alphas), t, xt)
-        return {"mean": mean, "variance": _extract(self.sigmas ** 2, t, xt), "eps": eps,
-                "x0": self.predict_x0(xt, t, eps)}
+        x0 = self.predict_x0(xt, t, eps)
+        variance = _extract(self.sigmas ** 2, t, xt)
+        if self.eta is None:
+            mean = (xt - _extract(self.eps_coef, t, xt) * eps) / _extract(np.sqrt(self.alphas), t, xt)
+        else:
+            abar_prev = _extract(self.alphas_bar_prev, t, xt)
+            mean = abar_prev.sqrt() * x0 + (1.0 - abar_prev - variance).clamp_min(0.0).sqrt() * eps
+        return {"mean": mean, "variance": variance, "eps": eps, "x0": x0}
 
     def p_sample(self, model, xt, t, generator=None, mask=None, guide=None):
         """Sample x_{t-1} ~ p_theta(x_{t-1} | x_t) = N(mu_theta(x_t, t), sigma_t^2 I)   (Eq. 5).
@@ -246,6 +265,20 @@ class GaussianDiffusion:
                 callback(t, x, out)
         return x
 
+    def invert(self, model, x0, mask=None, progress=False):
+        """DDIM inversion: x_0 -> x_T by the deterministic DDIM step run forwards, x_t = sqrt(abar_t) x0_hat +
+        sqrt(1 - abar_t) eps with eps = eps_theta(x_{t-1}, t) evaluated where the chain is (the usual
+        approximation: the noise at x_t is taken at x_{t-1}).  ``run`` with eta = 0 on this chain brings x_T
+        back to (nearly) x_0; regenerating it with guidance edits x_0 keeping what x_T encodes."""
+        net, x = self.wrap(model), x0
+        with torch.no_grad():
+            for t in tqdm(range(1, self.num_steps + 1), desc="inverting", disable=not progress, leave=False):
+                eps = net(x, t, mask)
+                abar_prev, abar = _extract(self.alphas_bar_prev, t, x), _extract(self.alphas_bar, t, x)
+                x0_hat = (x - (1.0 - abar_prev).sqrt() * eps) / abar_prev.sqrt()
+                x = abar.sqrt() * x0_hat + (1.0 - abar).sqrt() * eps
+        return x
+
     # ----------------------------------------------------------------------------- training
     def training_loss(self, model, x0, t=None, generator=None, mask=None, eps=None):
         """The simple loss of Eq. 8: E_{t, x_0, eps} ||eps - eps_theta(x_t, t)||^2 (mean over valid entries).
@@ -278,4 +311,9 @@ class GaussianDiffusion:
                 raise ValueError(f"respaced steps must lie in 1..{self.num_steps}")
         abar = self.alphas_bar[kept]
         betas = 1.0 - abar / np.concatenate([[1.0], abar[:-1]])
-        return GaussianDiffusion(betas, self.variance, timesteps=np.concatenate([[0], self.timesteps[kept]]))
+        return GaussianDiffusion(betas, self.variance, timesteps=np.concatenate([[0], self.timesteps[kept]]),
+                                 eta=self.eta)
+
+    def with_eta(self, eta):
+        """The same chain (steps, time labels) sampled by DDIM with ``eta`` (None: the ancestral DDPM step)."""
+        return GaussianDiffusion(self.betas[1:], self.variance, timesteps=self.timesteps, eta=eta)

@@ -209,3 +209,68 @@ def test_trace_records_each_measure_after_every_step_and_samples_like_sample():
     assert torch.equal(x, diffusion.sample(model, (2, 3), seed=4, progress=False))
     assert len(record["t"]) == len(record["norm"]) == 10 and record["t"][-1] == 0
     assert record["t"] == sorted(record["t"], reverse=True)
+
+
+def _gaussian_oracle(d, m, s):
+    """The exact eps_theta of data N(m, s^2) on chain ``d``, called with d's time labels."""
+    def oracle(xt, t_model, mask):
+        abar = torch.as_tensor(d.alphas_bar[t_model.long().numpy()], dtype=xt.dtype)[:, None]
+        return (1 - abar).sqrt() * (xt - abar.sqrt() * m) / (abar * s * s + 1 - abar)
+    return oracle
+
+
+def test_ddim_at_eta_1_is_the_ddpm_posterior_step_and_at_eta_0_is_deterministic():
+    base = GaussianDiffusion(linear_betas(200), variance="posterior").respace(40)
+    ddim1, ddim0 = base.with_eta(1.0), base.with_eta(0.0)
+    model = lambda x, t, mask: 0.3 * x + 0.1  # noqa: E731
+    x = torch.randn(5, 3, dtype=torch.float64)
+    for t in (40, 17, 2):
+        a, b = base.p_mean_variance(model, x, t), ddim1.p_mean_variance(model, x, t)
+        torch.testing.assert_close(a["mean"], b["mean"])
+        torch.testing.assert_close(a["variance"], b["variance"])
+    torch.testing.assert_close(ddim0.sample(model, (4, 3), seed=1, progress=False)[1:],
+                               ddim0.run(model, ddim0.sample(model, (4, 3), seed=1, progress=False) * 0 +
+                                         torch.randn(4, 3, generator=torch.Generator().manual_seed(1)),
+                                         seed=99, progress=False)[1:])
+    assert repr(ddim0) == "GaussianDiffusion(T=40, DDIM eta=0)" and ddim0.respace(10).eta == 0.0
+
+
+@pytest.mark.parametrize("eta", [0.0, 0.5])
+def test_ddim_matches_the_diffusers_ddim_scheduler_step_by_step(eta):
+    """The independent oracle: diffusers' DDIMScheduler, fed the same eps and noise.
+
+    Index mapping: the book's t is 1-based (t = 1..T noisy, 0 the data); diffusers' timesteps are 0-based, so
+    its timestep k is our paper step k + 1.  With "trailing" spacing and T = 2000, K = 50 diffusers keeps
+    1999, 1959, ..., 39 and steps to k - 40 (the last step to its final alpha_bar of 1): our respaced chain
+    on the paper steps 40, 80, ..., 2000, numbered 1..50 with abar_0 = 1."""
+    import diffusers  # requirements-test.txt
+    scheduler = diffusers.DDIMScheduler(num_train_timesteps=2000, beta_start=1e-4, beta_end=0.02,
+                                        beta_schedule="linear", clip_sample=False, set_alpha_to_one=True,
+                                        timestep_spacing="trailing", prediction_type="epsilon")
+    scheduler.set_timesteps(50)
+    ours = GaussianDiffusion(linear_betas(2000)).respace(list(range(40, 2001, 40))).with_eta(eta)
+    assert [int(k) + 1 for k in scheduler.timesteps] == [int(v) for v in ours.timesteps[50:0:-1]]
+    model = lambda x, t, mask: torch.tanh(x) * 0.9 + 0.05 * t.to(x.dtype)[:, None] / 2000  # noqa: E731
+    gen = torch.Generator().manual_seed(0)
+    x = theirs = torch.randn(3, 6, generator=gen)
+    for t, k in zip(range(50, 0, -1), scheduler.timesteps):
+        z = torch.randn(3, 6, generator=gen)
+        out = ours.p_mean_variance(model, x, t)
+        x = out["mean"] + ours.sigmas[t] * z
+        theirs = scheduler.step(model(theirs, torch.full((3,), float(k) + 1), None), k, theirs, eta=eta,
+                                variance_noise=z).prev_sample
+        torch.testing.assert_close(x, theirs, rtol=1e-4, atol=1e-5)
+
+
+def test_ddim_inversion_recovers_the_sequence_and_eta_outside_0_1_is_an_error():
+    full = GaussianDiffusion(linear_betas(1000))
+    d = full.respace(100).with_eta(0.0)
+    oracle = _gaussian_oracle(full, 0.5, 0.8)  # the network sees the original time labels
+    x0 = 0.5 + 0.8 * torch.randn(64, 2, dtype=torch.float64, generator=torch.Generator().manual_seed(2))
+    xt = d.invert(oracle, x0)
+    assert abs(xt.std().item() - 1.0) < 0.2  # x_T looks like noise
+    back = d.run(oracle, xt, progress=False)
+    assert (back - x0).pow(2).mean().sqrt() < 0.02
+    for bad in (-0.1, 1.5, True, "0"):
+        with pytest.raises(ValueError, match="eta must be None"):
+            GaussianDiffusion(linear_betas(10), eta=bad)
