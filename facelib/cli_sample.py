@@ -53,6 +53,9 @@ def add_parsers(sub):
         _option(t[task], task, "variance", "the sampler's sigma_t^2: beta_t (the paper's) or the posterior beta~_t",
                 choices=["beta", "posterior"])
         t[task].set_defaults(func=run)
+    _option(t["unconditional"], "unconditional", "sampler", "the reverse step: DDPM's ancestral step (Eq. 5) or "
+            "DDIM's", choices=list(config.SAMPLERS))
+    _option(t["unconditional"], "unconditional", "eta", "DDIM's noise, in [0, 1] (0: deterministic)", type=float)
     for task in ("label", "text", "geometry"):
         _option(t[task], task, "lr", "Adagrad learning rate of the guidance (None: the book's choice for the "
                 "dataset and the number of steps)", type=float)

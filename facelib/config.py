@@ -361,6 +361,9 @@ def _check_number(name, value, low=0.0, allow_none=False):
         raise ValueError(f"{name} must be a {'non-negative number' if low == 0 else f'number >= {low}'}, got {value!r}")
 
 
+SAMPLERS = ("ddpm", "ddim")
+
+
 @dataclass(frozen=True)
 class Sampling:
     """What every sampling task shares: the chain's length, the sequences' length, the seed."""
@@ -369,18 +372,28 @@ class Sampling:
     num_frames: int = 40  # paper §4: 40 frames
     seed: int = 0
     variance: str | None = None  # the sampler's sigma_t^2: "beta" (paper §4), "posterior" (beta~_t); None: the model's
+    sampler: str = "ddpm"  # "ddpm": the ancestral step of Eq. 5 (paper); "ddim": DDIM's step (Song et al. 2021)
+    eta: float = 0.0  # DDIM only: sigma_t^2 = eta^2 beta~_t, in [0, 1] (0: deterministic; 1: the DDPM posterior)
 
     def __post_init__(self):
         if self.variance is not None:
             _check_choice("variance", self.variance, ("beta", "posterior"))
+        _check_choice("sampler", self.sampler, SAMPLERS)
+        if isinstance(self.eta, bool) or not isinstance(self.eta, (int, float)) or not 0 <= self.eta <= 1:
+            raise ValueError(f"eta must be a number in [0, 1] (0: deterministic DDIM), got {self.eta!r}")
         if self.steps is not None:
             _check_positive_int("steps", self.steps)
         _check_positive_int("num_frames", self.num_frames)
         if isinstance(self.seed, bool) or not isinstance(self.seed, int):
             raise ValueError(f"seed must be an integer, got {self.seed!r}")
 
+    @property
+    def ddim_eta(self):
+        """DDIM's eta when the sampler is DDIM, else None (GaussianDiffusion's ``eta``)."""
+        return self.eta if self.sampler == "ddim" else None
+
     def paper(self):
-        return replace(self, steps=None, variance="beta")  # §4: T = 2000, sigma_t^2 = beta_t
+        return replace(self, steps=None, variance="beta", sampler="ddpm")  # §4: T = 2000, sigma_t^2 = beta_t
 
     def fast(self):
         return replace(self, steps=20)

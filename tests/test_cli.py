@@ -101,6 +101,9 @@ def test_cli_sample_writes_npz(tmp_path):
     z, cfg = sample(tmp_path / "out.npz", "unconditional", "--n", "2", "--length", "30", "--steps", "4")
     assert z["landmarks"].shape == (2, 30, 68, 3) and z["landmarks"].dtype == np.float32
     assert cfg["steps"] == 4 and cfg["checkpoint"] == "denoiser_coma"
+    z, cfg = sample(tmp_path / "ddim.npz", "unconditional", "--n", "2", "--steps", "4", "--sampler", "ddim",
+                    "--eta", "0")
+    assert cfg["sampler"] == "ddim" and cfg["eta"] == 0.0 and np.all(np.isfinite(z["landmarks"]))
 
 
 def test_cli_train_writes_a_loadable_checkpoint(tmp_path, capsys):

@@ -18,3 +18,16 @@ def test_shipped_denoisers_load_and_sample_deterministically():
         tasks.unconditional(0, denoiser=d)
     with pytest.raises(ValueError, match="num_frames must be in"):
         tasks.unconditional(2, num_frames=1, denoiser=d)
+
+
+def test_ddim_samples_unconditional_sequences_and_guided_tasks_refuse_it():
+    d = tasks.load_denoiser()
+    a = tasks.unconditional(2, seed=4, steps=10, sampler="ddim", eta=0.0, denoiser=d, progress=False)
+    ancestral = tasks.unconditional(2, seed=4, steps=10, denoiser=d, progress=False)
+    assert a.shape == (2, 40, 68, 3) and np.all(np.isfinite(a)) and np.abs(a - ancestral).max() > 0.1
+    with pytest.raises(ValueError, match="eta must be a number in"):
+        tasks.unconditional(2, steps=10, sampler="ddim", eta=1.5, denoiser=d)
+    with pytest.raises(ValueError, match="sampler must be one of"):
+        tasks.unconditional(2, steps=10, sampler="euler", denoiser=d)
+    with pytest.raises(ValueError, match="this task's guidance needs the ancestral DDPM step"):
+        tasks.label_control("high_smile", 2, steps=5, sampler="ddim", denoiser=d)

@@ -39,13 +39,14 @@ class TrainedDenoiser:
         """Normalised sequences (a tensor on any device) as numpy float32 in mm."""
         return self.normalizer.denormalize(x.detach().cpu()).numpy()
 
-    def diffusion_with(self, steps=None, variance=None):
+    def diffusion_with(self, steps=None, variance=None, eta=None):
         """The full T-step diffusion (steps=None) or a respaced one with ``steps`` steps; ``variance`` ("beta",
-        "posterior") replaces the sampler's sigma_t^2 (None: the denoiser's own)."""
+        "posterior") replaces the sampler's sigma_t^2 (None: the denoiser's own); ``eta`` samples by DDIM."""
         diffusion = self.diffusion
         if variance is not None and variance != diffusion.variance:
             diffusion = GaussianDiffusion(diffusion.betas[1:], variance)
-        return diffusion if steps is None or steps == diffusion.num_steps else diffusion.respace(steps)
+        diffusion = diffusion if steps is None or steps == diffusion.num_steps else diffusion.respace(steps)
+        return diffusion if eta is None else diffusion.with_eta(eta)
 
 
 def load_denoiser(name="denoiser_coma", variance="beta"):
@@ -119,9 +120,19 @@ def check_same_space(denoiser, guide):
         raise ValueError("guidance classifier and denoiser use different diffusion schedules")
 
 
+def check_ancestral(settings):
+    """Guided tasks sample with the ancestral DDPM step: Alg. 1-4 weigh the guidance by the step's variance,
+    which deterministic DDIM sets to zero.  A clear error for any other sampler."""
+    if settings.sampler != "ddpm":
+        raise ValueError(f"sampler {settings.sampler!r}: this task's guidance needs the ancestral DDPM step (its "
+                         f"variance weighs the guidance; DDIM's is eta^2 beta~_t); allowed: 'ddpm'. DDIM samples "
+                         f"unconditional sequences (sample unconditional --sampler ddim)")
+
+
 def guided_chain(guide, denoiser, settings):
     """The denoiser of the guide's dataset (or the given one, checked to share the guide's space) and its
     chain for the task's settings (steps, variance)."""
+    check_ancestral(settings)
     denoiser = denoiser or load_denoiser(f"denoiser_{guide.dataset}")
     check_same_space(denoiser, guide)
     guide.model.to(denoiser.device)

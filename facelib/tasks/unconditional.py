@@ -12,6 +12,6 @@ def unconditional(n, settings=Unconditional(), denoiser=None, progress=True, cal
     respaced without retraining); ``overrides`` change single fields, e.g. ``steps=100``."""
     settings, shape = task_settings(settings, overrides, n)
     denoiser = denoiser or load_denoiser(f"denoiser_{settings.dataset}")
-    diffusion = denoiser.diffusion_with(settings.steps, settings.variance)
+    diffusion = denoiser.diffusion_with(settings.steps, settings.variance, settings.ddim_eta)
     x = diffusion.sample(denoiser.model, shape, seed=settings.seed, progress=progress, callback=callback)
     return denoiser.to_mm(x)
