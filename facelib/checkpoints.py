@@ -41,13 +41,16 @@ def check_world(meta, name):
     record and name none); a clear error naming both worlds and the retrain command if not."""
     recorded = meta.get("world", {"version": 1, "fingerprint": None})
     current = world_fingerprint()
-    stale = recorded["version"] != current["version"] or None not in (recorded["fingerprint"], current["fingerprint"]) \
-        and recorded["fingerprint"] != current["fingerprint"]
-    if stale:
-        raise ValueError(f"checkpoint {name} was trained on world {recorded['version']} (fingerprint "
-                         f"{recorded['fingerprint']}), but this process builds world {current['version']} (fingerprint "
-                         f"{current['fingerprint']}); retrain it: `python -m facelib train all --only {Path(name).stem}`"
-                         f" (FACELIB_WORLD selects the world)")
+    known = None not in (recorded["fingerprint"], current["fingerprint"])
+    if recorded["version"] != current["version"]:
+        why = f"was trained on world {recorded['version']}, but this process builds world {current['version']}"
+    elif known and recorded["fingerprint"] != current["fingerprint"]:
+        why = (f"was trained on world {current['version']}'s datasets as they were (fingerprint "
+               f"{recorded['fingerprint']}); they have changed since (fingerprint {current['fingerprint']})")
+    else:
+        return
+    raise ValueError(f"checkpoint {name} {why}; retrain it (a shipped one: `python -m facelib train all --missing "
+                     f"--only {Path(name).stem}`; FACELIB_WORLD selects the world)")
 
 
 def save_checkpoint(name, model, kind, model_config, **metadata):

@@ -381,6 +381,8 @@ class Sampling:
         _check_choice("sampler", self.sampler, SAMPLERS)
         if isinstance(self.eta, bool) or not isinstance(self.eta, (int, float)) or not 0 <= self.eta <= 1:
             raise ValueError(f"eta must be a number in [0, 1] (0: deterministic DDIM), got {self.eta!r}")
+        if self.eta and self.sampler != "ddim":
+            raise ValueError(f"eta = {self.eta} is DDIM's noise: it needs sampler 'ddim' (the sampler is {self.sampler!r})")
         if self.steps is not None:
             _check_positive_int("steps", self.steps)
         _check_positive_int("num_frames", self.num_frames)

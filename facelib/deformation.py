@@ -196,7 +196,9 @@ def _motion_features(pairs):
 
 def fit_linear_regression(pairs, penalty=1e-2):
     """The closed-form reference row of Table 5: the ridge regression Delta M_f ~ A Delta L_f + b over
-    every training pair frame, one map for every face.  Returns the coefficients (205, V 3)."""
+    every training pair frame, one map for every face (``penalty`` on every coefficient, b included:
+    it is tiny against the normal equations' scale).  X^T X is formed in float64, X^T Y in float32 to
+    keep the (n K, V 3) targets in memory.  Returns the coefficients (205, V 3)."""
     x = _motion_features(pairs).astype(np.float64)
     y = pairs.delta_mesh.reshape(len(x), -1)
     return np.linalg.solve(x.T @ x + penalty * np.eye(x.shape[1]), (x.T.astype(np.float32) @ y).astype(np.float64))
@@ -211,8 +213,9 @@ def linear_regression_errors(coefficients, pairs):
 def attention_entropy(model, pairs, batch_sequences=8):
     """Entropy (nats) of the attention weights of Eq. 11 for every pair frame, (n, K); uniform weights
     over the coarse vertices give log(num_coarse), one vertex only gives 0."""
-    if not model.config.attention:
-        raise ValueError("this deformer has no attention (it averages F_e: 'ours without attention')")
+    if not (model.config.attention and model.config.identity):
+        raise ValueError("this deformer does not attend to the face: 'ours without attention' averages F_e, "
+                         "S2D never reads the mesh; only 'ours' has Eq. 11's attention")
     out = []
     with torch.no_grad():
         for s in range(0, len(pairs), batch_sequences):

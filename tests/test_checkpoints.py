@@ -54,10 +54,10 @@ def test_a_checkpoint_of_another_world_is_refused_naming_both_worlds_and_the_ret
     assert json.loads(stem.with_suffix(".json").read_text())["world"] == here
     other = 2 if config.WORLD == 1 else 1
     _with_world(stem, {"version": other, "fingerprint": "0123456789ab"})
-    with pytest.raises(ValueError, match=rf"trained on world {other} .*builds world {config.WORLD}.*train all --only tiny"):
+    with pytest.raises(ValueError, match=rf"trained on world {other}, but this process builds world {config.WORLD}"):
         load_checkpoint(stem, "denoiser", build)
     _with_world(stem, {"version": config.WORLD, "fingerprint": "0123456789ab"})  # same version, other datasets
-    with pytest.raises(ValueError, match="fingerprint 0123456789ab"):
+    with pytest.raises(ValueError, match="datasets as they were .fingerprint 0123456789ab.; they have changed"):
         load_checkpoint(stem, "denoiser", build)
     _with_world(stem, here)
     load_checkpoint(stem, "denoiser", build)

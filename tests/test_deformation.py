@@ -170,8 +170,9 @@ def test_attention_entropy_is_between_zero_and_uniform_and_refused_without_atten
     h = deformation.attention_entropy(model, test_pairs)
     assert h.shape == test_pairs.delta_landmarks.shape[:2]
     assert np.all(h >= 0) and np.all(h <= np.log(model.num_coarse) + 1e-5)
-    with pytest.raises(ValueError, match="has no attention"):
-        deformation.attention_entropy(deformation.build_model("no_attention"), test_pairs)
+    for other in ("no_attention", "s2d"):
+        with pytest.raises(ValueError, match="does not attend to the face"):
+            deformation.attention_entropy(deformation.build_model(other), test_pairs)
 
 
 def test_paired_differences_are_taken_per_face_and_seed_summaries_use_the_sample_std():

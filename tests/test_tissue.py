@@ -36,13 +36,24 @@ def test_sliding_falls_back_along_the_normal_on_a_convex_surface_only_for_tangen
     assert out[0, 2] == pytest.approx(-0.5 * 0.02 * 25) and np.allclose(out[1], d[1])
 
 
-def test_tightening_rolls_both_lips_inwards_and_pucker_outwards():
-    face = Face(sample_identity(3), world=2)
-    mid = [51, 57]  # outer upper- and lower-lip midpoints
-    rest = face.landmarks(au_vector())[mid]
-    tight = face.landmarks(au_vector(AU23=1.0))[mid] - rest
-    pucker = face.landmarks(au_vector(AU18=1.0))[mid] - rest
-    assert np.all(tight[:, 2] < 0) and np.all(pucker[:, 2] > 0)
+def test_a_positive_roll_turns_a_lip_edge_in_front_of_and_beside_its_pivot_backwards():
+    pivot = np.array([[0.0, 9.0, -7.0], [0.0, -9.0, -7.0]])  # above and behind / below and behind
+    edge = np.zeros((2, 3))
+    out = tissue.roll_lips(edge, np.array(0.2), np.array([1.0, -1.0]), pivot)
+    assert np.all(out[:, 2] < 0)  # both edges go back (into the mouth)
+    assert out[0, 1] < 0 < out[1, 1]  # ... the upper one down, the lower one up: towards each other
+    np.testing.assert_allclose(np.linalg.norm(out - pivot, axis=1), np.linalg.norm(edge - pivot, axis=1))
+
+
+@pytest.mark.parametrize("seed", [0, 3, 5, 6])
+def test_tightening_rolls_the_inner_lips_back_on_every_face(seed, monkeypatch):
+    face = Face(sample_identity(seed), world=2)
+    inner = [61, 62, 63, 65, 66, 67]  # inner upper and lower lips, fully in the lip rig
+    assert np.all(np.abs(face.tissue[1][face.template.landmark_index[inner]]) > 0.5)
+    rolled = face.landmarks(au_vector(AU23=1.0))[inner]
+    monkeypatch.setattr(tissue, "LIP_ROLL_DEG", 0.0)
+    unrolled = face.landmarks(au_vector(AU23=1.0))[inner]
+    assert np.all(rolled[:, 2] - unrolled[:, 2] < -1.0)  # mm, back into the mouth
 
 
 def test_in_world_2_an_au_is_far_from_linear_in_its_intensity_in_world_1_nearly_linear():

@@ -154,3 +154,6 @@ def test_train_all_missing_skips_what_this_world_already_has_and_retrains_anothe
     js.write_text(json.dumps({**meta, "world": {"version": 3 - config.WORLD, "fingerprint": None}}))
     again = training.train_all(["ic_coma_I"], fast=True, out_dir=tmp_path, progress=False, missing=True)
     assert [r[0] for r in again] == ["ic_coma_I"]
+    meta = json.loads(js.read_text())  # trained with other settings than the recipe's now: retrained too
+    js.write_text(json.dumps({**meta, "training": {**meta["training"], "lr": 0.5}}))
+    assert len(training.train_all(["ic_coma_I"], fast=True, out_dir=tmp_path, progress=False, missing=True)) == 1

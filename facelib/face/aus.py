@@ -50,7 +50,8 @@ AU_DESCRIPTIONS = {
 NUM_AUS = len(AU_NAMES)
 ROTATION_AUS = ("AU26", "AD30")
 JAW_PIVOT = np.array([0.0, -5.0, -85.0])  # temporo-mandibular axis, in front of the ears (mm)
-JAW_GLIDE = np.array([0.0, -2.0, 5.0])  # the condyles slide forward as the jaw opens (mm at AU26 = 1)
+JAW_GLIDE = np.array([0.0, -2.0, 5.0])  # the condyles slide forward as the jaw opens (mm at AU26 = 1; world 2: at
+#                                       the saturated opening, tissue.jaw_opening)
 JAW_DROP_DEG = 9.0  # AU26 at intensity 1
 JAW_SIDE_DEG = 6.0  # AD30 at intensity 1
 
@@ -337,12 +338,14 @@ class Face:
         World 2 stiffens and slides the summed displacement and rolls the lips before the jaw
         rotates, and its jaw saturates (facelib/face/tissue.py)."""
         d = np.einsum("...a,avc->...vc", w, self.basis[:, sel])
+        if self.world == 1:
+            d = self.neutral[sel] + d  # world 1 adds up in this order (its data are bit-identical to before)
         for (a, b), c in self.correctives.items():
             ia, ib = AU_NAMES.index(a), AU_NAMES.index(b)
             d = d + (w[..., ia] * w[..., ib])[..., None, None] * c[sel]
         jaw_drop = w[..., AU_NAMES.index("AU26"), None]
         if self.world == 1:
-            v = self.neutral[sel] + d
+            v = d
         else:
             kappa, lip_weight, lip_pivot = (q[sel] for q in self.tissue)
             v = self.neutral[sel] + tissue.slide(tissue.stiffen(d), self.normals[sel], kappa)

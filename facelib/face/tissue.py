@@ -17,7 +17,8 @@ World 2 keeps that skeleton, calibrates the magnitudes to published measurements
 5. **Lip rolling**: the red of each lip rotates about a pivot behind it, inwards when the lips
    tighten (AU23), outwards in a pucker (AU18): a rotation, nonlinear in w.
 6. **A jaw that saturates**: the opening angle is theta * A tanh(w / A), A = ``JAW_RANGE``,
-   about world 1's pivot, with world 2's larger ``JAW_DROP_DEG``.
+   about world 1's pivot, with world 2's larger ``JAW_DROP_DEG``; the condyles' forward glide
+   (aus.JAW_GLIDE) follows the saturated opening.
 
 Every step is smooth and local (a vertex needs only its own cached quantities), so landmarks are
 evaluated without the full mesh.
@@ -42,7 +43,7 @@ STIFFENING_MM = 30.0
 LIP_ROLL_DEG = 25.0  # AU23 at intensity 1 rolls the lips in by this angle; AU18 rolls them out
 LIP_PIVOT = (9.0, 7.0)  # the pivot sits this far from the mouth line (mm) and this deep (mm)
 CURVATURE_LIMIT = 0.04  # 1/mm: |kappa| is clipped to this (a radius of 25 mm)...
-CURVATURE_SMOOTHING = 30  # ...and smoothed over about 30 rings of the mesh (skull scale)
+CURVATURE_SMOOTHING = 30  # ...and smoothed by 30 rounds of neighbour averaging (about 17 mm: skull scale)
 
 
 def self_correctives(region):
@@ -106,15 +107,18 @@ def curvature(vertices, faces, normals):
 def lip_rig(canonical, neutral):
     """(weight (V,), pivot (V, 3)): how much each vertex rolls with its lip, and about which point.
 
-    The red of the upper lip (between the mouth line and LIP_PIVOT[0] above it, inside the
-    corners) rolls about a point LIP_PIVOT[0] above the mouth line and LIP_PIVOT[1] deep; the lower
-    lip likewise below.  The weight fades out towards the corners and away from the mouth line."""
+    The red of the upper lip (within LIP_PIVOT[0] above the mouth line, inside the corners) rolls about
+    a point LIP_PIVOT[0] above the mouth line and LIP_PIVOT[1] deep; the lower lip likewise below.  The
+    pivot is placed in the face's own frame (the vertex's neutral height minus its canonical height
+    above the mouth line is the face's mouth line there), so every lip vertex sits on the mouth's side
+    of its pivot on every face.  The weight fades out towards the corners and away from the mouth line."""
     x, y = canonical[:, 0], canonical[:, 1]
     across = smoothstep((MOUTH_CORNER_X - np.abs(x)) / 8.0)
     dist = np.abs(y - MOUTH_Y)
     weight = across * smoothstep((LIP_PIVOT[0] - dist) / 4.0)
     sign = np.where(y >= MOUTH_Y, 1.0, -1.0)
-    pivot = np.stack([neutral[:, 0], MOUTH_Y + sign * LIP_PIVOT[0], neutral[:, 2] - LIP_PIVOT[1]], axis=1)
+    mouth_line = neutral[:, 1] - (y - MOUTH_Y)
+    pivot = np.stack([neutral[:, 0], mouth_line + sign * LIP_PIVOT[0], neutral[:, 2] - LIP_PIVOT[1]], axis=1)
     return weight * sign, pivot
 
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import fields, replace
+from dataclasses import asdict, fields, replace
 from pathlib import Path
 
 from .. import results
@@ -56,16 +56,22 @@ def settings_for(model_name, fast=False, **settings):
     return chosen.fast() if fast else chosen
 
 
-def trained_on_this_world(name):
-    """True if checkpoint ``name`` exists and was trained on the world this process builds."""
+def trained_on_this_world(name, model=None, settings=None, fast=False):
+    """True if checkpoint ``name`` exists, was trained on the world this process builds and, when ``model``
+    and ``settings`` are given, with the settings of that recipe (settings_for, ``fast``) that it records."""
     pt, js = checkpoint_paths(name)
     if not (pt.exists() and js.exists()):
         return False
+    meta = json.loads(js.read_text())
     try:
-        check_world(json.loads(js.read_text()), pt.name)
+        check_world(meta, pt.name)
     except ValueError:
         return False
-    return True
+    if model is None:
+        return True
+    recorded = meta.get("training", {})
+    wanted = asdict(settings_for(model, fast, **settings))
+    return all(recorded[k] == (list(v) if isinstance(v, tuple) else v) for k, v in wanted.items() if k in recorded)
 
 
 def save_trained(recipe, model, history, name=None, **metadata):
@@ -95,15 +101,17 @@ def train_and_save(recipe, name=None, progress=True, device=None, resume=False):
 def train_all(names=None, fast=False, out_dir=None, progress=True, missing=False, resume=False):
     """Retrain the shipped checkpoints ``names`` (None: all, in the order of SHIPPED) and write them to
     data/checkpoints (or ``out_dir``).  ``missing``: skip those that exist and were trained on this
-    process's world; ``resume``: continue each from the training state a stopped run left.  Returns rows
-    [name, model, steps, seconds]; a full run into data/checkpoints also stores them as results/train_all.json."""
+    process's world with their recipe's current settings; ``resume``: continue each from the training
+    state a stopped run left (recipes that walk epochs, the IC's, start over).  Returns rows
+    [name, model, steps, seconds]; a run into data/checkpoints that trained something rewrites
+    results/train_all.json (:func:`store_training_times`)."""
     names = list(SHIPPED) if names is None else list(names)
     unknown = [n for n in names if n not in SHIPPED]
     if unknown:
         raise ValueError(f"no shipped checkpoint {unknown[0]!r}; the shipped ones: {', '.join(SHIPPED)}")
     stems = {name: str(Path(out_dir) / name) if out_dir else name for name in names}
     if missing:
-        names = [name for name in names if not trained_on_this_world(stems[name])]
+        names = [name for name in names if not trained_on_this_world(stems[name], *SHIPPED[name], fast)]
     rows = []
     for name in names:
         model, settings = SHIPPED[name]
@@ -120,14 +128,15 @@ def train_all(names=None, fast=False, out_dir=None, progress=True, missing=False
 def store_training_times():
     """results/train_all.json: every shipped checkpoint of this world with its steps and the wall time
     its checkpoint recorded (the last run's, when a stopped run was resumed)."""
-    rows = []
+    rows, seeds = [], set()
     for name, (model, _) in SHIPPED.items():
         if trained_on_this_world(name):
             meta = json.loads(checkpoint_paths(name)[1].read_text())
             steps = meta["training"].get("epochs") or meta["training"]["steps"]
+            seeds.add(int(meta["training"].get("seed", 0)))
             rows.append([name, model, steps, meta.get("wall_time_s"), bool(meta.get("resumed", False))])
     results.save_result("train_all", "Training every shipped checkpoint (python -m facelib train all)",
                         ["checkpoint", "model", "steps (epochs for the IC)", "seconds", "resumed"], rows,
-                        results.Run(checkpoints=[r[0] for r in rows], seeds=[0], n=len(rows), steps=[],
+                        results.Run(checkpoints=[r[0] for r in rows], seeds=sorted(seeds), n=len(rows), steps=[],
                                     wall_time_s=sum(r[3] or 0.0 for r in rows), command="python -m facelib train all"),
                         notes="seconds: the wall time recorded in each checkpoint (None: trained before it was recorded)")

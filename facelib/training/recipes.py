@@ -482,7 +482,8 @@ class DeformationRecipe(Recipe):
                 "held_out_expressions": list(deformation.HELD_OUT_EXPRESSIONS)} | super().metadata(model)
 
     def checkpoint_name(self):
-        return f"deform_{self.settings.method}_{self.settings.split}"
+        seed = f"_seed{self.settings.seed}" if self.settings.seed else ""  # Table 5 over seeds (training.SHIPPED)
+        return f"deform_{self.settings.method}_{self.settings.split}{seed}"
 
 
 RECIPES = {"denoiser": DenoiserRecipe, "guide": GuideRecipe, "text_head": TextHeadRecipe,
