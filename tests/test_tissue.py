@@ -49,7 +49,7 @@ def test_a_positive_roll_turns_a_lip_edge_in_front_of_and_beside_its_pivot_backw
 def test_tightening_rolls_the_inner_lips_back_on_every_face(seed, monkeypatch):
     face = Face(sample_identity(seed), world=2)
     inner = [61, 62, 63, 65, 66, 67]  # inner upper and lower lips, fully in the lip rig
-    assert np.all(np.abs(face.tissue[1][face.template.landmark_index[inner]]) > 0.5)
+    assert np.all(np.abs(face.tissue_rig[1][face.template.landmark_index[inner]]) > 0.5)
     rolled = face.landmarks(au_vector(AU23=1.0))[inner]
     monkeypatch.setattr(tissue, "LIP_ROLL_DEG", 0.0)
     unrolled = face.landmarks(au_vector(AU23=1.0))[inner]

@@ -295,7 +295,7 @@ class Face:
                 for pair, regions in pairs.items()}
 
     @cached_property
-    def tissue(self):
+    def tissue_rig(self):
         """World 2's per-vertex tissue quantities: (curvature (V,), lip weight (V,), lip pivot (V, 3))."""
         return (tissue.curvature(self.neutral, self.template.faces, self.normals),
                 *tissue.lip_rig(self.template.canonical, self.neutral))
@@ -347,7 +347,7 @@ class Face:
         if self.world == 1:
             v = d
         else:
-            kappa, lip_weight, lip_pivot = (q[sel] for q in self.tissue)
+            kappa, lip_weight, lip_pivot = (q[sel] for q in self.tissue_rig)
             v = self.neutral[sel] + tissue.slide(tissue.stiffen(d), self.normals[sel], kappa)
             roll = np.deg2rad(tissue.LIP_ROLL_DEG) * (w[..., AU_NAMES.index("AU23")] - w[..., AU_NAMES.index("AU18")])
             v = tissue.roll_lips(v, roll, lip_weight, lip_pivot)
