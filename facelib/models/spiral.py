@@ -86,14 +86,15 @@ class SpiralConv(nn.Module):
         if v != len(self.indices):
             raise ValueError(f"expected {len(self.indices)} vertices, got {v}")
         length, out = self.indices.shape[1], self.layer.out_features
+        # index_select, not x[:, idx]: the same gather, whose backward (index_add) is 1.6x faster on CPU.
         if out >= c:  # gather (B, V, L, C), reshape, one Linear
-            return self.layer(x[:, self.indices.reshape(-1)].reshape(b, v, -1))
+            return self.layer(torch.index_select(x, 1, self.indices.reshape(-1)).reshape(b, v, -1))
         # Fewer outputs than inputs: the same sum, W [x_s0; x_s1; ...] = sum_l W_l x_sl, computed as
         # "project every vertex by every W_l, then gather": it moves L * out numbers per vertex, not L * c.
         weight = self.layer.weight.reshape(out, length, c)
         projected = torch.einsum("bvc,olc->bvlo", x, weight).reshape(b, v * length, out)
         slot = self.indices * length + torch.arange(length, device=x.device)
-        return projected[:, slot.reshape(-1)].reshape(b, v, length, out).sum(2) + self.layer.bias
+        return torch.index_select(projected, 1, slot.reshape(-1)).reshape(b, v, length, out).sum(2) + self.layer.bias
 
 
 @lru_cache(maxsize=None)
@@ -106,7 +107,7 @@ def pool_index(level):
 
 def pool(x, level):
     """(B, V_level, C) -> (B, V_{level+1}, C): keep the coarser grid's vertices."""
-    return x[:, torch.as_tensor(pool_index(level))]
+    return torch.index_select(x, 1, torch.as_tensor(pool_index(level)))
 
 
 def unpool(x, level):
