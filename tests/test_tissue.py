@@ -90,3 +90,15 @@ def test_the_calibration_table_has_a_row_per_published_measure_with_each_worlds_
     for r in rows:
         assert r[5] == pytest.approx(r[3] / r[1]) and r[8] == pytest.approx(r[6] / r[1])
         assert r[4][0] <= r[3] <= r[4][1]
+
+
+def test_lips_press_instead_of_passing_through_each_other():
+    d = np.array([-1.0, 0.0, 0.25, 2.0])
+    overlap = tissue.lip_overlap(d, np.zeros(4), softness=0.5)
+    np.testing.assert_allclose(overlap, [0.0, 0.0, 0.0625, 1.75])
+    for seed in range(6):
+        for w in (au_vector(AU23=1.0), au_vector(AU17=1.0, AU23=0.5), au_vector()):
+            lm = Face(sample_identity(seed), world=2).landmarks(w)
+            assert lm[62, 1] - lm[66, 1] >= -tissue.CONTACT_SOFTNESS / 2 - 1e-9, seed  # upper lip minus lower
+    crossed = Face(sample_identity(3), world=1).landmarks(au_vector(AU17=1.0))
+    assert crossed[62, 1] - crossed[66, 1] < -1.0  # world 1 has no contact: its lips pass through

@@ -333,6 +333,22 @@ class Face:
         return v
 
     def _deform(self, w, sel):
+        """:meth:`_move`, then (world 2) lip contact: where the lower inner lip of a column ends up above
+        the upper one, the two lips of that column are pushed apart by half the overlap each
+        (tissue.lip_overlap, weighted by the lip rig), so that lips press instead of passing through."""
+        v = self._move(w, sel)
+        if self.world == 1:
+            return v
+        cols = tpl.N_COLS
+        inner = np.concatenate([tpl.LOWER_INNER_LIP_ROW * cols + np.arange(cols),
+                                tpl.UPPER_INNER_LIP_ROW * cols + np.arange(cols)])
+        lips = self._move(w, inner)
+        overlap = tissue.lip_overlap(lips[..., :cols, 1], lips[..., cols:, 1])  # (..., cols)
+        index = np.arange(len(self.neutral))[sel]
+        v[..., 1] += 0.5 * self.tissue_rig[1][index] * overlap[..., index % cols]
+        return v
+
+    def _move(self, w, sel):
         """N + sum w B + sum w w C, then the jaw rotations, at vertices ``sel`` (no mouth band).
 
         World 2 stiffens and slides the summed displacement and rolls the lips before the jaw

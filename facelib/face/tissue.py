@@ -16,12 +16,14 @@ World 2 keeps that skeleton, calibrates the magnitudes to published measurements
    mesh's curvature), d -> d - (kappa |d_t|^2 / 2) n.
 5. **Lip rolling**: the red of each lip rotates about a pivot behind it, inwards when the lips
    tighten (AU23), outwards in a pucker (AU18): a rotation, nonlinear in w.
-6. **A jaw that saturates**: the opening angle is theta * A tanh(w / A), A = ``JAW_RANGE``,
+6. **Lip contact**: where a column's lower inner lip would end above its upper one, the lips press
+   instead of passing through each other: each is pushed back by half the overlap (``lip_overlap``).
+7. **A jaw that saturates**: the opening angle is theta * A tanh(w / A), A = ``JAW_RANGE``,
    about world 1's pivot, with world 2's larger ``JAW_DROP_DEG``; the condyles' forward glide
    (aus.JAW_GLIDE) follows the saturated opening.
 
-Every step is smooth and local (a vertex needs only its own cached quantities), so landmarks are
-evaluated without the full mesh.
+Every step but the lip contact is local (a vertex needs only its own cached quantities); the contact
+reads the two inner-lip rows, 114 vertices, so landmarks are still evaluated without the full mesh.
 """
 from __future__ import annotations
 
@@ -42,6 +44,7 @@ JAW_RANGE = 1.2  # the jaw's angle saturates at JAW_RANGE * JAW_DROP_DEG
 STIFFENING_MM = 30.0
 LIP_ROLL_DEG = 25.0  # AU23 at intensity 1 rolls the lips in by this angle; AU18 rolls them out
 LIP_PIVOT = (9.0, 7.0)  # the pivot sits this far from the mouth line (mm) and this deep (mm)
+CONTACT_SOFTNESS = 0.5  # mm over which the lips' contact sets in (lip_overlap)
 CURVATURE_LIMIT = 0.04  # 1/mm: |kappa| is clipped to this (a radius of 25 mm)...
 CURVATURE_SMOOTHING = 30  # ...and smoothed by 30 rounds of neighbour averaging (about 17 mm: skull scale)
 
@@ -132,6 +135,14 @@ def roll_lips(v, angle, signed_weight, pivot):
     out[..., 1] = pivot[:, 1] + c * ry - s * rz
     out[..., 2] = pivot[:, 2] + s * ry + c * rz
     return out
+
+
+def lip_overlap(lower_y, upper_y, softness=CONTACT_SOFTNESS):
+    """How far (mm) a lower inner lip at height ``lower_y`` has passed above the upper one at ``upper_y``:
+    0 while they are apart, the overlap d = lower_y - upper_y beyond ``softness``, and d^2 / (2 softness)
+    in between (a smooth start of the contact)."""
+    d = np.asarray(lower_y) - np.asarray(upper_y)
+    return np.where(d <= 0, 0.0, np.where(d < softness, d * d / (2 * softness), d - softness / 2))
 
 
 def jaw_opening(w):
