@@ -163,11 +163,15 @@ class DenoiserTraining(Optimisation):
     schedule: str = "linear"  # paper §4: linear betas from 1e-4 to 0.02
     anatomy_pool: tuple = ("coma", "bu")  # our choice: training faces of these datasets (9 + 81)
     anatomy_swap: float = 0.5  # our choice: probability that a sequence gets another anatomy
+    conditional: bool = False  # True: label-conditional, for classifier-free guidance (Ho & Salimans 2022)
+    condition_dropout: float = 0.1  # conditional only: the label is dropped (-> "no label") this often (MDM: 0.1)
 
     def __post_init__(self):
         super().__post_init__()
         if not 0 <= self.anatomy_swap <= 1:
             raise ValueError(f"anatomy_swap is a probability in [0, 1], got {self.anatomy_swap}")
+        if not 0 <= self.condition_dropout < 1:
+            raise ValueError(f"condition_dropout is a probability in [0, 1), got {self.condition_dropout}")
 
 
 @dataclass(frozen=True)

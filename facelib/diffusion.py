@@ -280,16 +280,18 @@ class GaussianDiffusion:
         return x
 
     # ----------------------------------------------------------------------------- training
-    def training_loss(self, model, x0, t=None, generator=None, mask=None, eps=None):
+    def training_loss(self, model, x0, t=None, generator=None, mask=None, eps=None, **model_inputs):
         """The simple loss of Eq. 8: E_{t, x_0, eps} ||eps - eps_theta(x_t, t)||^2 (mean over valid entries).
 
-        t (B,) and eps (like x0) are drawn from ``generator`` unless given."""
+        t (B,) and eps (like x0) are drawn from ``generator`` unless given; ``model_inputs`` (a conditional
+        denoiser's ``labels``) go to the model."""
         if t is None:
             t = torch.randint(1, self.num_steps + 1, (x0.shape[0],), generator=generator)
         if eps is None:
             eps = torch.randn(x0.shape, generator=generator, dtype=x0.dtype).to(x0.device)
         xt = self.q_sample(x0, t, eps)
-        pred = model(xt, torch.as_tensor(self.timesteps[t.cpu().numpy()], dtype=torch.float32).to(x0.device), mask)
+        pred = model(xt, torch.as_tensor(self.timesteps[t.cpu().numpy()], dtype=torch.float32).to(x0.device), mask,
+                     **model_inputs)
         err = (eps - pred) ** 2
         if mask is None:
             return err.mean()

@@ -3,6 +3,7 @@ Gaussian estimate, bad input."""
 import pytest
 import torch
 
+from facelib.guidance import ClassifierFree
 from facelib.models.denoiser import Denoiser, DenoiserConfig
 
 
@@ -67,3 +68,33 @@ def test_gaussian_estimate_is_the_optimal_noise_estimate_for_gaussian_frames():
 def test_denoiser_rejects_bad_shapes(shape, t_shape, message):
     with pytest.raises(ValueError, match=message):
         Denoiser(SMALL)(torch.zeros(shape), torch.zeros(t_shape))
+
+
+def test_a_conditional_denoiser_reads_its_label_token_and_an_unconditional_one_refuses_labels():
+    torch.manual_seed(0)
+    model = Denoiser(DenoiserConfig(width=32, depth=1, heads=2, ff=64, num_classes=3, gaussian_skip=False))
+    torch.nn.init.normal_(model.out.weight)
+    x, t = torch.randn(2, 5, 68, 3), torch.tensor([10.0, 900.0])
+    free, none = model(x, t), model(x, t, labels=torch.tensor([3, 3]))
+    torch.testing.assert_close(free, none)  # no label = the "no label" token
+    assert (model(x, t, labels=torch.tensor([0, 2])) - free).abs().max() > 1e-3
+    for bad in (torch.tensor([0, 4]), torch.tensor([-1, 0]), torch.tensor([0])):
+        with pytest.raises(ValueError, match=r"labels must be \(2,\) class indices in 0..3"):
+            model(x, t, labels=bad)
+    with pytest.raises(ValueError, match="unconditional"):
+        Denoiser(DenoiserConfig(width=32, depth=1, heads=2, ff=64))(x, t, labels=torch.tensor([0, 1]))
+
+
+def test_classifier_free_guidance_mixes_the_conditional_and_free_estimates():
+    torch.manual_seed(0)
+    model = Denoiser(DenoiserConfig(width=32, depth=1, heads=2, ff=64, num_classes=3, gaussian_skip=False))
+    torch.nn.init.normal_(model.out.weight)
+    x, t, y = torch.randn(2, 5, 68, 3), torch.tensor([10.0, 900.0]), torch.tensor([1, 2])
+    free, conditional = model(x, t), model(x, t, labels=y)
+    torch.testing.assert_close(ClassifierFree(model, y, 0.0)(x, t), free)
+    torch.testing.assert_close(ClassifierFree(model, y, 1.0)(x, t), conditional)
+    torch.testing.assert_close(ClassifierFree(model, y, 3.0)(x, t), free + 3 * (conditional - free))
+    with pytest.raises(ValueError, match="needs a label-conditional denoiser"):
+        ClassifierFree(Denoiser(DenoiserConfig(width=32, depth=1, heads=2, ff=64)), y, 2.0)
+    with pytest.raises(ValueError, match="scale must be a number >= 0"):
+        ClassifierFree(model, y, -1.0)

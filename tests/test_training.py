@@ -157,3 +157,12 @@ def test_train_all_missing_skips_what_this_world_already_has_and_retrains_anothe
     meta = json.loads(js.read_text())  # trained with other settings than the recipe's now: retrained too
     js.write_text(json.dumps({**meta, "training": {**meta["training"], "lr": 0.5}}))
     assert len(training.train_all(["ic_coma_I"], fast=True, out_dir=tmp_path, progress=False, missing=True)) == 1
+
+
+def test_a_conditional_denoiser_trains_with_label_dropout_and_is_named_cfg():
+    recipe = training.recipe("denoiser", fast=True, conditional=True, condition_dropout=0.5, steps=3)
+    assert recipe.checkpoint_name() == "denoiser_coma_cfg" and recipe.architecture.num_classes == 12
+    model, history = training.fit(recipe, progress=False)
+    assert model.label_embedding.num_embeddings == 13 and np.isfinite(history["loss"]).all()
+    with pytest.raises(ValueError, match="condition_dropout is a probability"):
+        config.DenoiserTraining(conditional=True, condition_dropout=1.0)

@@ -41,6 +41,7 @@ class DenoiserConfig:
     gaussian_skip: bool = True  # our addition (see the module docstring)
     num_diffusion_steps: int = 2000  # the schedule the skip needs (paper §4)
     schedule: str = "linear"
+    num_classes: int = 0  # > 0: label-conditional (classifier-free guidance), a label token before the frames
 
 
 class Denoiser(BiT):
@@ -59,6 +60,8 @@ class Denoiser(BiT):
         self.register_buffer("alphas_bar", torch.cat([torch.ones(1, dtype=abar.dtype), abar]).float())
         self.register_buffer("prior_basis", torch.eye(features))  # eigenvectors of Sigma (columns)
         self.register_buffer("prior_variances", torch.ones(features))  # eigenvalues of Sigma
+        if c.num_classes:  # the label's token; index num_classes is "no label" (the unconditional model)
+            self.label_embedding = nn.Embedding(c.num_classes + 1, c.width)
 
     @torch.no_grad()
     def fit_prior(self, frames):
@@ -77,10 +80,22 @@ class Denoiser(BiT):
         y = y * (1 - abar).sqrt() / (abar * self.prior_variances + 1 - abar)
         return (y @ self.prior_basis.T).reshape(xt.shape)
 
-    def forward(self, xt, t, mask=None):
-        """Noise estimate for x_t at steps t; ``mask`` (B, F) bool marks the valid frames."""
+    def forward(self, xt, t, mask=None, labels=None):
+        """Noise estimate for x_t at steps t; ``mask`` (B, F) bool marks the valid frames.  A label-conditional
+        denoiser (``num_classes`` > 0) reads ``labels`` (B,) class indices, ``num_classes`` meaning "no label"
+        (None: no label for any); an unconditional one takes none."""
         check_sequence_input(xt, t, mask, self.config.num_landmarks)
-        eps = self.out(self.encode(xt, t, mask)).reshape(xt.shape)
+        k = self.config.num_classes
+        if not k:
+            if labels is not None:
+                raise ValueError("this denoiser is unconditional (num_classes = 0): it takes no labels")
+            tokens = self.encode(xt, t, mask)
+        else:
+            labels = torch.full((len(xt),), k) if labels is None else torch.as_tensor(labels)
+            if labels.shape != (len(xt),) or labels.min() < 0 or labels.max() > k:
+                raise ValueError(f"labels must be ({len(xt)},) class indices in 0..{k} ({k}: no label)")
+            tokens = self.encode(xt, t, mask, prefix=self.label_embedding(labels.to(xt.device))[:, None])[:, 1:]
+        eps = self.out(tokens).reshape(xt.shape)
         return eps + self.gaussian_eps(xt, t.to(xt.device)) if self.config.gaussian_skip else eps
 
     def config_dict(self):

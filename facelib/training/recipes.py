@@ -82,14 +82,16 @@ class DenoiserRecipe(Recipe):
 
     def __init__(self, settings=config.DenoiserTraining(), model_config=None):
         self.settings = settings
+        train = data.load_dataset(settings.dataset, "train", num_frames=settings.num_frames)
         self.architecture = model_config or DenoiserConfig(num_diffusion_steps=settings.num_diffusion_steps,
-                                                             schedule=settings.schedule)
+                                                             schedule=settings.schedule,
+                                                             num_classes=len(train.label_names) * settings.conditional)
         if (self.architecture.num_diffusion_steps, self.architecture.schedule) != (settings.num_diffusion_steps,
                                                                                      settings.schedule):
             raise ValueError("the denoiser's schedule must match the training schedule")
         self.name = f"denoiser ({settings.dataset})"
         self.variable = not isinstance(settings.num_frames, int)
-        train = data.load_dataset(settings.dataset, "train", num_frames=settings.num_frames)
+        self.labels = torch.as_tensor(train.labels)
         self.normalizer = data.LandmarkNormalizer.fit(train)
         self.lengths = train.lengths
         x = torch.as_tensor(self.normalizer.normalize(train.landmarks))
@@ -113,8 +115,12 @@ class DenoiserRecipe(Recipe):
         x0 = swap_anatomy(self.x_all[idx], self.own[idx], self.pool, self.settings.anatomy_swap, draws)
         x0 = x0 * self.mask_all[idx][:, :, None, None]
         t = draws.randint(1, self.settings.num_diffusion_steps + 1)
+        inputs = {}
+        if self.architecture.num_classes:  # classifier-free guidance: drop the label now and then
+            dropped = draws.rand() < self.settings.condition_dropout
+            inputs["labels"] = torch.where(dropped, self.architecture.num_classes, self.labels[idx])
         loss = self.diffusion.training_loss(model, x0, t=t, eps=draws.randn(*x0.shape[1:]),
-                                            mask=self.mask_all[idx] if self.variable else None)
+                                            mask=self.mask_all[idx] if self.variable else None, **inputs)
         return loss, {"loss": loss.item()}
 
     def metadata(self, model):
@@ -124,7 +130,8 @@ class DenoiserRecipe(Recipe):
                 "data_dir": str(config.SYNTHETIC_DIR.name)}
 
     def checkpoint_name(self):
-        return f"denoiser_{self.settings.dataset}" + ("_var" if self.variable else "")
+        return f"denoiser_{self.settings.dataset}" + ("_var" if self.variable else "") + (
+            "_cfg" if self.settings.conditional else "")
 
 
 # --------------------------------------------------------------------------- networks that read noisy x_t
