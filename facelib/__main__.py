@@ -1,4 +1,4 @@
-"""Command line of the book: ``python -m facelib {data,train,sample,neutral,animate,chapter,results}`` (see ``--help`` of each)."""
+"""Command line of the book: ``python -m facelib {data,train,sample,edit,neutral,animate,chapter,results}`` (see ``--help`` of each)."""
 from __future__ import annotations
 
 import argparse
@@ -49,7 +49,7 @@ def _train(args):
         return 0
     given = {"dataset": args.dataset, "classifier_type": args.type, "method": args.method, "split": args.split,
              "steps": args.steps, "batch_size": args.batch_size, "seed": args.seed,
-             "num_frames": (35, 45) if args.variable_length else None}
+             "num_frames": (35, 45) if args.variable_length else None, "conditional": args.conditional or None}
     recipe = training.recipe(args.name, fast=args.fast, **{k: v for k, v in given.items() if v is not None})
     t0 = time.perf_counter()
     written = training.train_and_save(recipe, name=args.out, device=args.device, resume=args.resume)
@@ -148,6 +148,9 @@ def main(argv=None):
     p.add_argument("--device", default=None, choices=["cpu", "cuda"], help="default: a GPU when torch sees one")
     p.add_argument("--resume", action="store_true", help="continue from <out>.state.pt if a run left one "
                    "(the state is written every 500 steps; train all: each checkpoint's)")
+    p.add_argument("--conditional", action="store_true", help="denoiser: label-conditional, for classifier-free "
+                   "guidance (labels dropped with probability config.DenoiserTraining.condition_dropout; checkpoint "
+                   "denoiser_<dataset>_cfg)")
     p.add_argument("--only", nargs="+", default=None, help="train all: only these shipped checkpoints")
     p.add_argument("--missing", action="store_true", help="train all: skip the checkpoints that exist and were "
                    "trained on this world (FACELIB_WORLD)")

@@ -15,13 +15,20 @@ TASKS = {"unconditional": "the unconditional DDPM (§3.1)", "label": "label cont
          "text": "text control (Alg. 2)", "decoder": "a text decoder's sequence refined by the DDPM (not in the paper)",
          "fill": "expression filling (Alg. 3)", "geometry": "geometry-adaptive generation of a given face (Alg. 4)"}
 SETTINGS = config.SAMPLING | {"decoder": config.DecoderThenDiffusion()}
-GUIDES = {"label": "guide_{}_I", "text": "guide_{}_text", "decoder": "motionclip_{}", "geometry": "guide_{}_S"}
+EDIT = ("edit --input seq.npz --label X --out edited.npz: each sequence is inverted by DDIM (eta = 0) to the x_T "
+        "the chain regenerates it from, then regenerated from there with label guidance towards X: its identity "
+        "and timing are kept, its expression changes (not in the paper)")
+GUIDES = {"label": "guide_{}_I", "edit": "guide_{}_I", "text": "guide_{}_text", "decoder": "motionclip_{}", "geometry": "guide_{}_S"}
 
 
 def _default(task, field):
-    """'default X; --paper: Y' for the help of an option (a field of the task's settings)."""
-    value, paper = (getattr(s, field) for s in (SETTINGS[task], SETTINGS[task].paper()))
+    """'default X; --paper: Y' for the help of an option (a field of the task's settings; a task that is not
+    in the paper has no --paper)."""
     show = {None: "None"} if field != "steps" else {None: "all T = 2000"}
+    value = getattr(SETTINGS[task], field)
+    if task not in TASKS:
+        return f"default {show.get(value, value)}"
+    paper = getattr(SETTINGS[task].paper(), field)
     return f"default {show.get(value, value)}; --paper: {show.get(paper, paper)}"
 
 
@@ -32,13 +39,16 @@ def _option(parser, task, field, help, *aliases, **kwargs):
 
 
 def add_parsers(sub):
-    common = argparse.ArgumentParser(add_help=False)
-    g = common.add_argument_group("every task")
+    io = argparse.ArgumentParser(add_help=False)
+    g = io.add_argument_group("every task")
     g.add_argument("--out", required=True, help="output .npz (key 'landmarks': (n, F, 68, 3) float32 in mm, "
                    "and the 'config' that produced it)")
-    g.add_argument("--n", type=int, default=16, help="number of sequences (default 16)")
-    g.add_argument("--checkpoint", default=None, help="denoiser checkpoint (default denoiser_<dataset>)")
+    g.add_argument("--checkpoint", default=None, help="denoiser checkpoint (default denoiser_<dataset>, with "
+                   "--guidance cfg denoiser_<dataset>_cfg)")
     g.add_argument("--device", default=None, choices=["cpu", "cuda"], help="default: a GPU when torch sees one")
+    common = argparse.ArgumentParser(add_help=False, parents=[io])
+    g = common.add_argument_group("every sampling task")
+    g.add_argument("--n", type=int, default=16, help="number of sequences (default 16)")
     g.add_argument("--paper", action="store_true", help="the paper's printed algorithm: all T = 2000 steps, no "
                    "addition of the book (options given explicitly still apply)")
     p = sub.add_parser("sample", help="generate landmark sequences: sample TASK --out out.npz (see sample TASK --help)")
@@ -53,19 +63,40 @@ def add_parsers(sub):
         _option(t[task], task, "variance", "the sampler's sigma_t^2: beta_t (the paper's) or the posterior beta~_t",
                 choices=["beta", "posterior"])
         t[task].set_defaults(func=run)
-    _option(t["unconditional"], "unconditional", "sampler", "the reverse step: DDPM's ancestral step (Eq. 5) or "
-            "DDIM's", choices=list(config.SAMPLERS))
-    _option(t["unconditional"], "unconditional", "eta", "DDIM's noise, in [0, 1] (0: deterministic)", type=float)
-    for task in ("label", "text", "geometry"):
+    edit = sub.add_parser("edit", parents=[io], help="change the expression of a given sequence: DDIM "
+                          "inversion, then label control (not in the paper)", description=EDIT)
+    edit.set_defaults(func=run, task="edit", paper=False)
+    edit.add_argument("--input", required=True, help=".npz whose 'landmarks' (F, 68, 3) or (n, F, 68, 3) in mm "
+                      "holds the sequence(s) to edit")
+    t["edit"] = edit
+    for task in t:
+        if task != "edit":
+            _option(t[task], task, "sampler", "the reverse step: DDPM's ancestral step (Eq. 5) or DDIM's",
+                    choices=list(config.SAMPLERS))
+        _option(t[task], task, "eta", "DDIM's noise, in [0, 1] (0: deterministic)", type=float)
+    for task in ("edit",):
+        _option(t[task], task, "steps", "reverse steps, respaced from T = 2000 (inversion and regeneration)",
+                type=int)
+        _option(t[task], task, "seed", "the random seed (eta > 0)", type=int)
+        _option(t[task], task, "refine", "fixed-point iterations per inversion step (0: the plain DDIM inversion)",
+                type=int)
+        _option(t[task], task, "dataset", "the data the networks were trained on", choices=list(data.DATASET_NAMES))
+    for task in ("label", "edit", "text", "geometry"):
         _option(t[task], task, "lr", "Adagrad learning rate of the guidance (None: the book's choice for the "
                 "dataset and the number of steps)", type=float)
         _option(t[task], task, "guidance_weight", "lambda of Alg. 1-2 (None: the book's choice for the text score)",
                 type=float)
-    for task in ("label", "geometry"):
+    for task in ("label", "edit", "geometry"):
         t[task].add_argument("--label", required=True, help="an expression label of the dataset, e.g. high_smile "
                              "(geometry: or 'mouth_open E2N')")
-    _option(t["label"], "label", "method", "adagrad (Alg. 1) or mean_shift", choices=list(config.GUIDANCE_METHODS))
-    _option(t["label"], "label", "scale", "the mean shift's gradient scale", type=float)
+    for task in ("label", "edit"):
+        _option(t[task], task, "guidance", "classifier: a noisy classifier steers the unconditional denoiser (the "
+                "paper's); cfg: classifier-free guidance of the label-conditional denoiser denoiser_<dataset>_cfg",
+                choices=list(config.LABEL_GUIDANCE))
+        _option(t[task], task, "method", "classifier guidance by adagrad (Alg. 1) or mean_shift",
+                choices=list(config.GUIDANCE_METHODS))
+        _option(t[task], task, "scale", f"the mean shift's gradient scale s (None: {config.MEAN_SHIFT_SCALE:g}) or "
+                f"CFG's weight w >= 0 (None: {config.CFG_SCALE:g})", type=float)
     for task in ("text", "decoder"):
         t[task].add_argument("--text", required=True, help='what to show, e.g. "disgust high smile" or "from the '
                              'neutral face to bareteeth"')
@@ -112,7 +143,7 @@ def settings_of(args):
     base = SETTINGS[args.task].paper() if args.paper else SETTINGS[args.task]
     settings = replace(base, **{f.name: getattr(args, f.name) for f in fields(base)
                                 if getattr(args, f.name, None) is not None})
-    if args.task == "label" and settings.lr is None:
+    if args.task in ("label", "edit") and settings.lr is None:
         settings = replace(settings, lr=tasks.adagrad_lr(settings.dataset, settings.steps))
     if args.task == "text" and settings.guidance_weight is None:
         settings = replace(settings, guidance_weight=tasks.text_guidance_weight(settings.score))
@@ -123,10 +154,11 @@ def settings_of(args):
 
 def run(args):
     settings = settings_of(args)
-    checkpoint = args.checkpoint or f"denoiser_{settings.dataset}"
+    cfg = getattr(settings, "guidance", None) == "cfg"
+    checkpoint = args.checkpoint or f"denoiser_{settings.dataset}" + ("_cfg" if cfg else "")
     denoiser = tasks.load_denoiser(checkpoint)
     denoiser.model.to(device_for(args.device))
-    n, extra = args.n, {}
+    n, extra = getattr(args, "n", None), {}
     if args.task == "unconditional":
         landmarks = tasks.unconditional(n, settings, denoiser)
     elif args.task == "label":
@@ -135,6 +167,10 @@ def run(args):
         landmarks, extra["texts"] = tasks.text_control(args.text, n, settings, denoiser), [args.text] * n
     elif args.task == "decoder":
         landmarks, extra["texts"] = tasks.decoder_then_diffusion(args.text, n, settings, denoiser), [args.text] * n
+    elif args.task == "edit":
+        given = read_npz_array(args.input, ["landmarks"], "the sequences to edit")
+        landmarks = tasks.edit(tasks.check_sequences(given), args.label, settings, denoiser)
+        extra["labels"] = [args.label] * len(landmarks)
     elif args.task == "fill":
         given = read_npz_array(args.input, ["landmarks"], "the sequence to fill")
         if given.ndim not in (3, 4) or given.shape[-2:] != (68, 3):
@@ -147,8 +183,9 @@ def run(args):
         landmarks = tasks.geometry_adaptive(neutral, extra["labels"], n, settings, denoiser)
     used = {"task": args.task, "paper": args.paper, "n": len(landmarks), "checkpoint": checkpoint,
             "checkpoint_sha256": denoiser.meta["sha256"],
-            "guidance": GUIDES.get(args.task, "").format(settings.dataset),
+            "guide": "" if cfg else GUIDES.get(args.task, "").format(settings.dataset),
             "adagrad_steps": config.ADAGRAD_STEPS, **asdict(settings),
+            **({"scale": settings.guidance_scale} if hasattr(settings, "guidance_scale") else {}),
             **{k: getattr(args, k) for k in ("label", "text", "input", "known", "neutral") if hasattr(args, k)}}
     np.savez(args.out, landmarks=landmarks.astype(np.float32), config=json.dumps(used),
              **{k: np.asarray(v) for k, v in extra.items()})

@@ -317,6 +317,11 @@ class DeformationTraining(Optimisation):
 ADAGRAD_STEPS = 3  # paper §3.2: "3 steps of the Adagrad update for each diffusion step"
 GUIDANCE_WEIGHT = 0.01  # paper §4: lambda = 0.01 "as in [51]"
 GUIDANCE_METHODS = ("adagrad", "mean_shift")  # Alg. 1; classic classifier guidance (Dhariwal & Nichol)
+# What steers label control: a noisy classifier on the unconditional denoiser (the paper's), or classifier-free
+# guidance (Ho & Salimans 2022), a label-conditional denoiser with no classifier (DenoiserTraining.conditional)
+LABEL_GUIDANCE = ("classifier", "cfg")
+MEAN_SHIFT_SCALE = 1.0  # the mean shift's gradient scale s (Dhariwal & Nichol's classifier scale 1)
+CFG_SCALE = 2.5  # classifier-free guidance's weight w: MDM's (Tevet et al. 2023)
 # Alg. 1's Adagrad learning rate, per dataset, for a chain of LR_REFERENCE_STEPS reverse steps: not in the
 # paper; each is the pick of the label-control chapter's sweep (48 guided sequences per rate, 200 steps, best
 # accuracy - 2 FID).
@@ -399,7 +404,7 @@ class Sampling:
         return self.eta if self.sampler == "ddim" else None
 
     def paper(self):
-        return replace(self, steps=None, variance="beta", sampler="ddpm")  # §4: T = 2000, sigma_t^2 = beta_t
+        return replace(self, steps=None, variance="beta", sampler="ddpm", eta=0.0)  # §4: T = 2000, sigma_t^2 = beta_t
 
     def fast(self):
         return replace(self, steps=20)
@@ -413,22 +418,56 @@ class Unconditional(Sampling):
 
 @dataclass(frozen=True)
 class LabelControl(Sampling):
-    """Alg. 1: 3 Adagrad steps per reverse step on lambda log p_theta + log p_phi (or the classic mean shift)."""
+    """Alg. 1: 3 Adagrad steps per reverse step on lambda log p_theta + log p_phi (or the classic mean shift);
+    or, not in the paper, classifier-free guidance of a label-conditional denoiser."""
 
     steps: int | None = 200  # the Adagrad rate was chosen at 200 steps (results/label_steps_coma.json)
     dataset: str = "coma"
+    guidance: str = "classifier"  # the paper's; "cfg": classifier-free (the denoiser denoiser_<dataset>_cfg)
     classifier_type: str = "I"  # paper §5.1: type I (label) for Alg. 1
-    method: str = "adagrad"  # Alg. 1; "mean_shift": Dhariwal & Nichol's classifier guidance
+    method: str = "adagrad"  # classifier guidance by Alg. 1; "mean_shift": Dhariwal & Nichol's
     guidance_weight: float = GUIDANCE_WEIGHT
     lr: float | None = None  # None: ADAGRAD_LR of the dataset, scaled to the steps (tasks.adagrad_lr)
-    scale: float = 1.0  # the mean shift's gradient scale s
+    scale: float | None = None  # the mean shift's s or CFG's w; None: MEAN_SHIFT_SCALE or CFG_SCALE
 
     def __post_init__(self):
         super().__post_init__()
+        _check_choice("guidance", self.guidance, LABEL_GUIDANCE)
         _check_choice("method", self.method, GUIDANCE_METHODS)
         _check_number("the guidance weight (lambda)", self.guidance_weight)
         _check_number("lr", self.lr, allow_none=True)
-        _check_number("scale", self.scale)
+        _check_number("scale", self.scale, allow_none=True)
+
+    @property
+    def guidance_scale(self):
+        """The scale this run uses: ``scale``, or the default of its guidance (CFG's w, the mean shift's s)."""
+        if self.scale is not None:
+            return self.scale
+        return CFG_SCALE if self.guidance == "cfg" else MEAN_SHIFT_SCALE
+
+    def paper(self):
+        return replace(super().paper(), guidance="classifier", method="adagrad")
+
+
+@dataclass(frozen=True)
+class Edit(LabelControl):
+    """Editing a given sequence (not in the paper): DDIM inversion to x_T, then regeneration with label control;
+    what x_T encodes (timing, identity) is kept, the guidance changes the expression."""
+
+    steps: int | None = 100  # issue 27: inversion at eta = 0 with 100 steps
+    sampler: str = "ddim"  # inversion is DDIM's
+    eta: float = 0.0
+    refine: int = 2  # fixed-point iterations per inversion step (GaussianDiffusion.invert): 3 forwards per step
+
+    def __post_init__(self):
+        super().__post_init__()
+        if isinstance(self.refine, bool) or not isinstance(self.refine, int) or self.refine < 0:
+            raise ValueError(f"refine must be a number of fixed-point iterations >= 0, got {self.refine!r}")
+        if self.sampler != "ddim":
+            raise ValueError(f"editing inverts a sequence by DDIM: the sampler must be 'ddim', got {self.sampler!r}")
+
+    def paper(self):
+        raise ValueError("editing is not in the paper: there is no --paper version of it")
 
 
 @dataclass(frozen=True)
@@ -463,8 +502,8 @@ class TextControl(Sampling):
             _check_number(name, getattr(self, name), allow_none=True)
 
     def paper(self):
-        return replace(self, steps=None, variance="beta", score="cosine", head_input="x_t", vocabulary=False,
-                       particles=1, max_time=None, guidance_weight=GUIDANCE_WEIGHT)  # §4: lambda = 0.01
+        return replace(super().paper(), score="cosine", head_input="x_t", vocabulary=False, particles=1, max_time=None,
+                       guidance_weight=GUIDANCE_WEIGHT)  # §4: lambda = 0.01
 
 
 @dataclass(frozen=True)
@@ -500,7 +539,7 @@ class Fill(Sampling):
         _check_positive_int("resample", self.resample)
 
     def paper(self):
-        return replace(self, steps=None, variance="beta", reconstruction_scale=0.0, resample=1)  # Alg. 3 as printed
+        return replace(super().paper(), reconstruction_scale=0.0, resample=1)  # Alg. 3 as printed
 
 
 @dataclass(frozen=True)
@@ -526,15 +565,14 @@ class GeometryAdaptive(Sampling):
         _check_number("lr", self.lr)
 
     def paper(self):
-        return replace(self, steps=None, variance="beta", passes=HARMONISING_PASSES, reconstruction_scale=0.0,
-                       resample=1)
+        return replace(super().paper(), passes=HARMONISING_PASSES, reconstruction_scale=0.0, resample=1)
 
     def fast(self):
         return replace(self, steps=10)
 
 
 SAMPLING = {"unconditional": Unconditional(), "label": LabelControl(), "text": TextControl(), "fill": Fill(),
-            "geometry": GeometryAdaptive()}
+            "geometry": GeometryAdaptive(), "edit": Edit()}
 
 
 def with_overrides(settings, overrides):

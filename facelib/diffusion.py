@@ -179,16 +179,26 @@ class GaussianDiffusion:
 
     def p_mean_variance(self, model, xt, t, mask=None):
         """Mean and variance of p_theta(x_{t-1} | x_t) from eps_theta, and x0_hat: Eq. 7 (correct form), or
-        with ``eta`` DDIM's sqrt(abar_{t-1}) x0_hat + sqrt(1 - abar_{t-1} - sigma_t^2) eps_theta."""
+        with ``eta`` DDIM's sqrt(abar_{t-1}) x0_hat + sqrt(1 - abar_{t-1} - sigma_t^2) eps_theta.
+
+        "guidance_variance" is the variance the guidance of Alg. 1-4 weighs its pull with: the step's own under
+        DDPM; under DDIM, whose own is eta^2 beta~_t (0 at eta = 0), the paper's sigma_t^2 = beta_t, so that
+        guidance pulls about as hard whatever the sampler's noise (our choice)."""
         eps = self.wrap(model)(xt, t, mask)
+        return self.mean_variance_from_eps(xt, t, eps)
+
+    def mean_variance_from_eps(self, xt, t, eps):
+        """:meth:`p_mean_variance` for a given noise estimate eps (the mean is linear in eps)."""
         x0 = self.predict_x0(xt, t, eps)
         variance = _extract(self.sigmas ** 2, t, xt)
         if self.eta is None:
             mean = (xt - _extract(self.eps_coef, t, xt) * eps) / _extract(np.sqrt(self.alphas), t, xt)
+            guidance_variance = variance
         else:
             abar_prev = _extract(self.alphas_bar_prev, t, xt)
             mean = abar_prev.sqrt() * x0 + (1.0 - abar_prev - variance).clamp_min(0.0).sqrt() * eps
-        return {"mean": mean, "variance": variance, "eps": eps, "x0": x0}
+            guidance_variance = _extract(self.betas, t, xt)
+        return {"mean": mean, "variance": variance, "guidance_variance": guidance_variance, "eps": eps, "x0": x0}
 
     def p_sample(self, model, xt, t, generator=None, mask=None, guide=None):
         """Sample x_{t-1} ~ p_theta(x_{t-1} | x_t) = N(mu_theta(x_t, t), sigma_t^2 I)   (Eq. 5).
@@ -265,18 +275,24 @@ class GaussianDiffusion:
                 callback(t, x, out)
         return x
 
-    def invert(self, model, x0, mask=None, progress=False):
+    def invert(self, model, x0, mask=None, progress=False, refine=0):
         """DDIM inversion: x_0 -> x_T by the deterministic DDIM step run forwards, x_t = sqrt(abar_t) x0_hat +
-        sqrt(1 - abar_t) eps with eps = eps_theta(x_{t-1}, t) evaluated where the chain is (the usual
-        approximation: the noise at x_t is taken at x_{t-1}).  ``run`` with eta = 0 on this chain brings x_T
-        back to (nearly) x_0; regenerating it with guidance edits x_0 keeping what x_T encodes."""
+        sqrt(1 - abar_t) eps.  The step from x_t back to x_{t-1} reads eps_theta(x_t, t), which is not known
+        before x_t is: the usual inversion takes it at x_{t-1} (an error of first order in the step), and
+        ``refine`` fixed-point iterations then re-read it at the x_t found, so that the DDIM step from x_t lands
+        on x_{t-1} again (Pan et al. 2023, AIDI).  ``run`` with eta = 0 on this chain brings x_T back to x_0;
+        regenerating it with guidance edits x_0 keeping what x_T encodes."""
+        if isinstance(refine, bool) or not isinstance(refine, (int, np.integer)) or refine < 0:
+            raise ValueError(f"refine must be a number of fixed-point iterations >= 0, got {refine!r}")
         net, x = self.wrap(model), x0
         with torch.no_grad():
             for t in tqdm(range(1, self.num_steps + 1), desc="inverting", disable=not progress, leave=False):
-                eps = net(x, t, mask)
                 abar_prev, abar = _extract(self.alphas_bar_prev, t, x), _extract(self.alphas_bar, t, x)
-                x0_hat = (x - (1.0 - abar_prev).sqrt() * eps) / abar_prev.sqrt()
-                x = abar.sqrt() * x0_hat + (1.0 - abar).sqrt() * eps
+                xt = x
+                for _ in range(1 + refine):
+                    eps = net(xt, t, mask)
+                    xt = abar.sqrt() * (x - (1.0 - abar_prev).sqrt() * eps) / abar_prev.sqrt() + (1.0 - abar).sqrt() * eps
+                x = xt
         return x
 
     # ----------------------------------------------------------------------------- training

@@ -62,7 +62,7 @@ def test_cli_text_task_writes_npz(tmp_path, capsys):
     out = tmp_path / "text.npz"
     npz, used = sample(out, "text", "--text", "disgust high smile", "--n", "2", "--steps", "5")
     assert npz["landmarks"].shape == (2, 40, 68, 3) and list(npz["texts"]) == ["disgust high smile"] * 2
-    assert used["dataset"] == "coma+bu" and used["guidance"] == "guide_coma+bu_text"
+    assert used["dataset"] == "coma+bu" and used["guide"] == "guide_coma+bu_text"
     assert used["lr"] == pytest.approx(tasks.text_lr(5))
     assert used["guidance_weight"] == config.TEXT_GUIDANCE_WEIGHT and used["head_input"] == "x_t"
     assert used["particles"] == 1 and used["max_time"] is None
@@ -86,7 +86,7 @@ def test_cli_text_task_writes_npz(tmp_path, capsys):
         main(["sample", "label", "--label", "happy", "--particles", "2", "--out", str(out)])
     assert "unrecognized arguments: --particles" in capsys.readouterr().err  # an option of text only
     npz, used = sample(out, "decoder", *sad[1:], "--n", "2", "--steps", "20", "--start", "400")
-    assert used["task"] == "decoder" and used["start"] == 400 and used["guidance"] == "motionclip_coma+bu"
+    assert used["task"] == "decoder" and used["start"] == 400 and used["guide"] == "motionclip_coma+bu"
     assert npz["landmarks"].shape == (2, 40, 68, 3)
     for extra in (["--lr", "0.1"], ["--head-input", "x0_hat"], ["--score", "contrastive"], ["--particles", "2"],
                   ["--vocabulary"]):  # options of Alg. 2, which the decoder route does not run
@@ -171,3 +171,35 @@ def test_sampling_on_an_absent_gpu_is_a_clear_error(tmp_path, capsys):
         main(["sample", "unconditional", "--n", "1", "--steps", "2", "--device", "cuda",
               "--out", str(tmp_path / "x.npz")])
     assert "no CUDA device" in capsys.readouterr().err and not (tmp_path / "x.npz").exists()
+
+
+def test_cli_classifier_free_label_control_and_edit(tmp_path, coma_test, capsys):
+    stem = tmp_path / "cfg"
+    assert main(["train", "denoiser", "--conditional", "--steps", "3", "--out", str(stem)]) == 0
+    assert tasks.load_denoiser(stem).meta["class_names"] == list(coma_test.label_names)
+    z, cfg = sample(tmp_path / "cfg.npz", "label", "--label", "eyebrow", "--guidance", "cfg", "--scale", "2",
+                    "--checkpoint", str(stem), "--n", "2", "--steps", "3", "--sampler", "ddim")
+    assert z["landmarks"].shape == (2, 40, 68, 3) and cfg["guidance"] == "cfg" and cfg["scale"] == 2.0
+    assert cfg["guide"] == "" and cfg["checkpoint"] == str(stem)
+    out = tmp_path / "refused.npz"
+    with pytest.raises(SystemExit):  # CFG with the unconditional denoiser
+        main(["sample", "label", "--label", "eyebrow", "--guidance", "cfg", "--checkpoint", "denoiser_coma",
+              "--n", "2", "--steps", "3", "--out", str(out)])
+    assert "needs a label-conditional denoiser" in capsys.readouterr().err and not out.exists()
+    seq = tmp_path / "seq.npz"
+    np.savez(seq, landmarks=coma_test.landmarks[:2])
+    edited = tmp_path / "edited.npz"
+    assert main(["edit", "--input", str(seq), "--label", "mouth_open", "--steps", "4", "--out", str(edited)]) == 0
+    with np.load(edited) as f:
+        assert f["landmarks"].shape == (2, 40, 68, 3) and list(f["labels"]) == ["mouth_open"] * 2
+        assert json.loads(str(f["config"]))["sampler"] == "ddim"
+    bad = coma_test.landmarks[:1].copy()
+    bad[0, 0, 0, 0] = np.nan
+    np.savez(seq, landmarks=bad)
+    for args, message in [([], "NaN or infinite"), (["--eta", "1.5"], "eta must be a number in"),
+                          (["--scale", "-1"], "scale must be a non-negative number")]:
+        if args:
+            np.savez(seq, landmarks=coma_test.landmarks[:1])
+        with pytest.raises(SystemExit):
+            main(["edit", "--input", str(seq), "--label", "mouth_open", "--steps", "4", "--out", str(out), *args])
+        assert message in capsys.readouterr().err and not out.exists()

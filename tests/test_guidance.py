@@ -40,7 +40,7 @@ def test_reconstruction_guidance_pulls_the_estimate_towards_the_known_frame(deno
 
 def test_log_p_theta_is_the_gaussian_log_density_up_to_a_constant():
     mean, var = torch.randn(2, 5, 68, 3), torch.full((2, 1, 1, 1), 0.3)
-    out = {"mean": mean, "variance": var}
+    out = {"mean": mean, "variance": var, "guidance_variance": var}
     x1, x2 = torch.randn(2, 5, 68, 3), torch.randn(2, 5, 68, 3)
     normal = torch.distributions.Normal(mean, var.sqrt())
     exact = lambda x: normal.log_prob(x).flatten(1).sum(1)  # noqa: E731
@@ -53,7 +53,8 @@ def test_one_guided_step_increases_the_class_log_probability(small_classifier):
     labels = torch.tensor([0, 1, 2, 1])
     score = ClassifierScore(clf, labels)
     xt = torch.randn(4, 10, 68, 3)
-    out = {"mean": xt * 0.9, "variance": torch.full((4, 1, 1, 1), 0.01)}
+    var = torch.full((4, 1, 1, 1), 0.01)
+    out = {"mean": xt * 0.9, "variance": var, "guidance_variance": var}
     x_hat = out["mean"] + 0.1 * torch.randn_like(xt)
     t = 50
     t_prev = diffusion.model_time(t - 1, 4)
@@ -71,7 +72,8 @@ def test_mean_shift_guidance_moves_along_the_gradient(small_classifier):
     clf, diffusion = small_classifier
     score = ClassifierScore(clf, torch.tensor([2, 2]))
     xt = torch.randn(2, 8, 68, 3)
-    out = {"mean": xt, "variance": torch.full((2, 1, 1, 1), 0.02)}
+    var = torch.full((2, 1, 1, 1), 0.02)
+    out = {"mean": xt, "variance": var, "guidance_variance": var}
     x_hat = xt + 0.1
     assert torch.equal(MeanShiftGuidance(score, diffusion, scale=0.0)(x_hat, xt, 10, out), x_hat)
     shifted = MeanShiftGuidance(score, diffusion, scale=1.0)(x_hat, xt, 10, out)
@@ -95,7 +97,8 @@ def test_one_guided_step_increases_the_cosine_with_the_text(text_head):
     score = CosineScore(text_head.model, emb)
     gen = torch.Generator().manual_seed(0)
     xt = torch.randn(4, 40, 68, 3, generator=gen)
-    out = {"mean": xt * 0.99, "variance": torch.full((4, 1, 1, 1), 0.02)}
+    var = torch.full((4, 1, 1, 1), 0.02)
+    out = {"mean": xt * 0.99, "variance": var, "guidance_variance": var}
     x_hat = out["mean"] + 0.14 * torch.randn(xt.shape, generator=gen)
     t = 300
     t_prev = diffusion.model_time(t - 1, 4)
@@ -162,7 +165,8 @@ def test_contrastive_score_is_the_heads_log_probability_of_the_matched_descripti
         got = ContrastiveScore(text_head.model, held_out, refs[None], tau)(x[:1], t[:1])
         torch.testing.assert_close(got, (w * p).sum().log()[None], atol=1e-5, rtol=1e-5)
     diffusion = GaussianDiffusion(linear_betas(2000))
-    out = {"mean": x[:4] * 0.99, "variance": torch.full((4, 1, 1, 1), 0.02)}
+    var = torch.full((4, 1, 1, 1), 0.02)
+    out = {"mean": x[:4] * 0.99, "variance": var, "guidance_variance": var}
     four = ContrastiveScore(text_head.model, refs[:4], refs.expand(4, -1, -1), tau)
     guided = OptimisationGuidance(four, diffusion, guidance_weight=0.0, lr=0.01)(out["mean"], x[:4], 401, out)
     with torch.no_grad():
@@ -223,9 +227,30 @@ def test_best_particles_keeps_the_highest_scoring_candidate_of_each_sequence():
 def test_guidance_above_max_time_is_left_out():
     diffusion = GaussianDiffusion(linear_betas(2000)).respace(10)
     x = torch.zeros(2, 4, 68, 3)
-    out = {"mean": x, "variance": torch.ones(2, 1, 1, 1)}
+    var = torch.ones(2, 1, 1, 1)
+    out = {"mean": x, "variance": var, "guidance_variance": var}
     g = OptimisationGuidance(lambda x, t: x.sum((1, 2, 3)), diffusion, 0.0, 0.1, max_time=1000)
     high = int(np.flatnonzero(diffusion.timesteps > 1000)[0])
     low = int(np.flatnonzero((diffusion.timesteps <= 1000) & (diffusion.timesteps > 0))[-1])
     assert torch.equal(g(x, x, high, out), x)
     assert (g(x, x, low, out) > 0).all()  # climbs the score
+
+
+def test_under_ddim_the_mean_shift_moves_the_noise_estimate_as_dhariwal_and_nichols_algorithm_2(small_classifier):
+    clf, diffusion = small_classifier
+    ddim = diffusion.with_eta(0.0)
+    score = ClassifierScore(clf, torch.tensor([1, 2]))
+    torch.manual_seed(1)
+    xt, eps, t = torch.randn(2, 8, 68, 3), torch.randn(2, 8, 68, 3), 40
+    out = ddim.mean_variance_from_eps(xt, t, eps)
+    assert torch.equal(out["variance"], torch.zeros_like(out["variance"]))  # eta = 0: no noise...
+    assert out["guidance_variance"].item() == pytest.approx(diffusion.betas[t])  # ...but a pull
+    x = xt.clone().requires_grad_(True)
+    grad = torch.autograd.grad(score(x, diffusion.model_time(t, 2)).sum(), x)[0]
+    eps_hat = eps - 2.0 * diffusion.sqrt_one_minus_alphas_bar[t] * grad
+    expected = ddim.mean_variance_from_eps(xt, t, eps_hat)["mean"]
+    torch.testing.assert_close(MeanShiftGuidance(score, ddim, scale=2.0)(out["mean"], xt, t, out), expected)
+    # the deterministic (probability-flow) step carries half the ancestral step's pull, beta_t / (2 alpha_t)
+    ddpm_shift = 2.0 * diffusion.betas[t] * grad
+    ratio = ((expected - out["mean"]).norm() / ddpm_shift.norm()).item()
+    assert ratio == pytest.approx(0.5 / diffusion.alphas[t], rel=0.02)

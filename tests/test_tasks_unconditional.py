@@ -20,7 +20,7 @@ def test_shipped_denoisers_load_and_sample_deterministically():
         tasks.unconditional(2, num_frames=1, denoiser=d)
 
 
-def test_ddim_samples_unconditional_sequences_and_guided_tasks_refuse_it():
+def test_ddim_samples_unconditional_sequences():
     d = tasks.load_denoiser()
     a = tasks.unconditional(2, seed=4, steps=10, sampler="ddim", eta=0.0, denoiser=d, progress=False)
     ancestral = tasks.unconditional(2, seed=4, steps=10, denoiser=d, progress=False)
@@ -29,5 +29,3 @@ def test_ddim_samples_unconditional_sequences_and_guided_tasks_refuse_it():
         tasks.unconditional(2, steps=10, sampler="ddim", eta=1.5, denoiser=d)
     with pytest.raises(ValueError, match="sampler must be one of"):
         tasks.unconditional(2, steps=10, sampler="euler", denoiser=d)
-    with pytest.raises(ValueError, match="this task's guidance needs the ancestral DDPM step"):
-        tasks.label_control("high_smile", 2, steps=5, sampler="ddim", denoiser=d)

@@ -13,7 +13,8 @@ x_{t-1} to continue with.  Hooks speak in the chain's steps only; the scores the
   holds x near the model's mean, stiffer at small t.
 * :class:`MeanShiftGuidance`, the classic classifier guidance (Sohl-Dickstein et al.; Dhariwal
   & Nichol 2021, Alg. 1): x_{t-1} ~ N(mu + s sigma_t^2 grad_{x_t} log p_phi(y | x_t, t), sigma_t^2 I).
-  Paper §3.2 writes the shift with grad p_phi; the correct form has grad log p_phi.
+  Paper §3.2 writes the shift with grad p_phi; the correct form has grad log p_phi.  Under DDIM (their
+  Alg. 2) the noise estimate moves instead: eps_hat = eps - s sqrt(1 - abar_t) grad_{x_t} log p_phi.
 * :class:`ReconstructionGuidance` (not in the paper; Ho et al. 2022, "video diffusion models", with
   the normalised step of Chung et al. 2023, DPS): pull x_{t-1} along -grad_{x_t} ||x_0_hat(x_t)|S_K -
   x_0|S_K||, so that the *unknown* frames agree with known ones (the remedy for Alg. 3 and 4's seams).
@@ -42,8 +43,9 @@ def steps_of(t, x):
 
 
 def log_p_theta(x, out):
-    """log p_theta(x | x_t) = log N(x; mu_theta(x_t, t), sigma_t^2 I) + const, per sequence (B,)."""
-    return -((x - out["mean"]) ** 2 / (2 * out["variance"])).flatten(1).sum(1)
+    """log p_theta(x | x_t) = log N(x; mu_theta(x_t, t), sigma_t^2 I) + const, per sequence (B,), with
+    sigma_t^2 the step's guidance variance (under DDIM beta_t: :meth:`GaussianDiffusion.p_mean_variance`)."""
+    return -((x - out["mean"]) ** 2 / (2 * out["guidance_variance"])).flatten(1).sum(1)
 
 
 def gradient_at(xt, fn):
@@ -105,7 +107,8 @@ class OptimisationGuidance:
 
 @dataclass
 class MeanShiftGuidance:
-    """Classic classifier guidance: shift the sample by scale * sigma_t^2 * grad_{x_t} score(x_t, t)."""
+    """Classic classifier guidance: shift the sample by scale * sigma_t^2 * grad_{x_t} score(x_t, t); under DDIM,
+    take the step with eps - scale * sqrt(1 - abar_t) * grad_{x_t} score(x_t, t) instead."""
 
     score: Callable
     diffusion: GaussianDiffusion
@@ -117,7 +120,11 @@ class MeanShiftGuidance:
 
     def __call__(self, x_hat, xt, t, out):
         grad = gradient_at(xt, lambda x: self.score(x, steps_of(t, x)))
-        return x_hat + self.scale * out["variance"] * grad
+        if self.diffusion.eta is None:
+            return x_hat + self.scale * out["variance"] * grad
+        # DDIM (Dhariwal & Nichol 2021, Alg. 2): eps_hat = eps - s sqrt(1 - abar_t) grad, the step taken with eps_hat
+        eps = out["eps"] - self.scale * float(self.diffusion.sqrt_one_minus_alphas_bar[t]) * grad
+        return x_hat + self.diffusion.mean_variance_from_eps(xt, t, eps)["mean"] - out["mean"]
 
 
 @dataclass

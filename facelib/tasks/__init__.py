@@ -1,10 +1,12 @@
 """The paper's sampling tasks (§3.2, App. C), one module each, all on one unconditional DDPM: it is never
-retrained, only its reverse process is guided.
+retrained, only its reverse process is guided (classifier-free label control, not in the paper, samples a
+label-conditional denoiser instead).
 
 * ``unconditional``  §3.1                    * ``label``     label control, Alg. 1
 * ``text``           text control, Alg. 2    * ``decoder``   a text decoder's sequence refined by the DDPM
 * ``fill``           expression filling, Alg. 3
 * ``geometry``       geometry-adaptive generation, Alg. 4
+* ``edit``           a given sequence inverted by DDIM and regenerated under label control (not in the paper)
 * ``loading``        the trained denoiser and guidance networks they sample with
 
 Every task is called as ``task(what, n, settings, models..., progress, **overrides)``: ``settings`` is the
@@ -13,14 +15,15 @@ printed algorithm, ``.fast()`` a few steps) and ``overrides`` change single fiel
 ``tasks.label_control("high_smile", 16, steps=100)``.
 """
 from .decoder import decoder_then_diffusion
+from .edit import check_sequences, edit, invert
 from .fill import fill
 from .geometry import geometry_adaptive, geometry_passes, order_sensitive_label, table4_inputs
-from .label import adagrad_lr, label_control, step_scaled_lr, table1_generators
+from .label import adagrad_lr, check_labels, label_control, label_sampler, step_scaled_lr, table1_generators
 from .loading import TrainedDenoiser, TrainedGuide, check_same_space, load_denoiser, load_guide, load_text_head
 from .text import text_control, text_guidance_weight, text_lr, text_score
 from .unconditional import unconditional
 
-__all__ = ["decoder_then_diffusion", "table1_generators", "fill", "geometry_adaptive", "geometry_passes", "order_sensitive_label", "table4_inputs",
+__all__ = ["decoder_then_diffusion", "check_sequences", "edit", "invert", "check_labels", "label_sampler", "table1_generators", "fill", "geometry_adaptive", "geometry_passes", "order_sensitive_label", "table4_inputs",
            "adagrad_lr", "label_control", "step_scaled_lr", "TrainedDenoiser", "TrainedGuide", "check_same_space",
            "load_denoiser", "load_guide", "load_text_head", "text_control", "text_guidance_weight", "text_lr",
            "text_score", "unconditional"]

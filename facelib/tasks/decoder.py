@@ -7,7 +7,7 @@ import torch
 
 from ..baselines import generate_from_text, load_baseline
 from ..config import DecoderThenDiffusion
-from .loading import check_ancestral, load_denoiser, task_settings
+from .loading import load_denoiser, task_settings
 from .text import text_list
 
 
@@ -27,8 +27,7 @@ def decoder_then_diffusion(text, n=8, settings=DecoderThenDiffusion(), denoiser=
     if denoiser.meta["training"]["dataset"] != dataset:
         raise ValueError(f"the denoiser was trained on {denoiser.meta['training']['dataset']!r}, the decoder's "
                          f"sequences are of {dataset!r}: use denoiser_{dataset}")
-    check_ancestral(settings)
-    diffusion = denoiser.diffusion_with(settings.steps, settings.variance)
+    diffusion = denoiser.diffusion_with(settings.steps, settings.variance, settings.ddim_eta)
     last = denoiser.diffusion.num_steps
     if not 1 <= settings.start <= last:
         raise ValueError(f"start must be a step in 1..{last}, got {settings.start!r}")

@@ -6,7 +6,7 @@ import torch
 from ..config import Fill, with_overrides
 from ..guidance import ReconstructionGuidance
 from ..inpainting import KnownFrames, check_fill_input, keep_known
-from .loading import check_ancestral, load_denoiser
+from .loading import load_denoiser
 
 
 def known_noise(seed):
@@ -26,8 +26,7 @@ def fill(sequences, known, settings=Fill(), denoiser=None, progress=True, callba
     settings = with_overrides(settings, overrides)
     x, mask = check_fill_input(sequences, known)
     denoiser = denoiser or load_denoiser(f"denoiser_{settings.dataset}")
-    check_ancestral(settings)
-    diffusion = denoiser.diffusion_with(settings.steps, settings.variance)
+    diffusion = denoiser.diffusion_with(settings.steps, settings.variance, settings.ddim_eta)
     x0, mask_t = denoiser.to_model(x), torch.as_tensor(mask).to(denoiser.device)
     reconstruction = (ReconstructionGuidance(denoiser.model, diffusion, x0, mask_t, settings.reconstruction_scale)
                       if settings.reconstruction_scale else None)

@@ -1,4 +1,5 @@
-"""Label control (§3.2, Alg. 1): the unconditional DDPM guided by a noisy classifier p_phi(y | x_t, t)."""
+"""Label control (§3.2, Alg. 1): the unconditional DDPM guided by a noisy classifier p_phi(y | x_t, t); or,
+not in the paper, classifier-free guidance of a label-conditional denoiser."""
 from __future__ import annotations
 
 import numpy as np
@@ -6,8 +7,8 @@ import numpy as np
 from .. import data
 from ..baselines import LABEL_BASELINES, generate, load_baseline
 from ..config import ADAGRAD_LR, LR_REFERENCE_STEPS, LabelControl
-from ..guidance import ClassifierScore, MeanShiftGuidance, OptimisationGuidance
-from .loading import guided_chain, load_guide, task_settings
+from ..guidance import ClassifierFree, ClassifierScore, MeanShiftGuidance, OptimisationGuidance
+from .loading import guided_chain, load_denoiser, load_guide, task_settings
 from .unconditional import unconditional
 
 
@@ -37,13 +38,35 @@ def label_control(label, n=16, settings=LabelControl(), denoiser=None, guide=Non
     """Label control (Alg. 1): n sequences (n, F, 68, 3) float32 in mm showing ``label``.
 
     label: a label name of the dataset (e.g. "high_smile"), or a list of n names (one per sequence).
-    settings: :class:`facelib.config.LabelControl`, the method ("adagrad": Alg. 1's 3 Adagrad steps on
-    lambda log p_theta + log p_phi; "mean_shift": classic classifier guidance), lambda, the rate (None:
-    :func:`adagrad_lr`), the steps (None: the paper's T = 2000); ``overrides`` change single fields."""
+    settings: :class:`facelib.config.LabelControl`: the guidance ("classifier": a noisy classifier steers the
+    unconditional denoiser, by Alg. 1's 3 Adagrad steps on lambda log p_theta + log p_phi or by the classic
+    mean shift; "cfg": classifier-free guidance of the label-conditional denoiser), lambda, the rate (None:
+    :func:`adagrad_lr`), the scale, the steps (None: the paper's T = 2000), the sampler; ``overrides`` change
+    single fields."""
     settings, shape = task_settings(settings, overrides, n)
+    labels = check_labels(label, n)
+    denoiser, diffusion, model, hook = label_sampler(labels, settings, denoiser, guide)
+    x = diffusion.sample(model, shape, seed=settings.seed, guide=hook, progress=progress, callback=callback)
+    return denoiser.to_mm(x)
+
+
+def check_labels(label, n):
+    """n label names from one name or a list of n names (a clear error otherwise)."""
     labels = [label] * n if isinstance(label, str) else list(label)
     if len(labels) != n or not all(isinstance(y, str) for y in labels):
         raise ValueError(f"label must be a label name or a list of n={n} label names, got {label!r}")
+    return labels
+
+
+def label_sampler(labels, settings, denoiser=None, guide=None):
+    """What label control samples with: (denoiser, chain, the model the chain runs, the sampler hook).
+
+    Classifier guidance: the unconditional denoiser and a hook that climbs log p_phi(y | x_t) (Alg. 1 or the
+    mean shift).  Classifier-free guidance: denoiser_<dataset>_cfg inside :class:`ClassifierFree`, no hook."""
+    if settings.guidance == "cfg":
+        denoiser = denoiser or load_denoiser(f"denoiser_{settings.dataset}_cfg")
+        model = ClassifierFree(denoiser.model, denoiser.class_indices(labels), settings.guidance_scale)
+        return denoiser, denoiser.diffusion_with(settings.steps, settings.variance, settings.ddim_eta), model, None
     guide = guide or load_guide(settings.dataset, settings.classifier_type)
     score = ClassifierScore(guide.model, guide.class_indices(labels))
     denoiser, diffusion = guided_chain(guide, denoiser, settings)
@@ -53,9 +76,8 @@ def label_control(label, n=16, settings=LabelControl(), denoiser=None, guide=Non
             lr = adagrad_lr(guide.dataset, settings.steps, guide.meta["training"]["num_diffusion_steps"])
         hook = OptimisationGuidance(score, diffusion, settings.guidance_weight, lr)
     else:
-        hook = MeanShiftGuidance(score, diffusion, settings.scale)
-    x = diffusion.sample(denoiser.model, shape, seed=settings.seed, guide=hook, progress=progress, callback=callback)
-    return denoiser.to_mm(x)
+        hook = MeanShiftGuidance(score, diffusion, settings.guidance_scale)
+    return denoiser, diffusion, denoiser.model, hook
 
 
 def table1_generators(dataset, indices, steps, guide, denoiser, mean_shift_scale, seed=0):

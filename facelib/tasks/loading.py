@@ -39,6 +39,18 @@ class TrainedDenoiser:
         """Normalised sequences (a tensor on any device) as numpy float32 in mm."""
         return self.normalizer.denormalize(x.detach().cpu()).numpy()
 
+    def class_indices(self, labels):
+        """The label indices of a label-conditional denoiser (classifier-free guidance) for label names."""
+        names = self.meta.get("class_names")
+        if not self.model.config.num_classes or not names:
+            raise ValueError(f"classifier-free guidance needs a label-conditional denoiser (train one with "
+                             f"config.DenoiserTraining(conditional=True): denoiser_<dataset>_cfg); "
+                             f"{self.meta.get('name', 'this checkpoint')} is unconditional")
+        bad = [y for y in labels if y not in names]
+        if bad:
+            raise ValueError(f"unknown label {bad[0]!r} for this denoiser; allowed: {', '.join(names)}")
+        return [names.index(y) for y in labels]
+
     def diffusion_with(self, steps=None, variance=None, eta=None):
         """The full T-step diffusion (steps=None) or a respaced one with ``steps`` steps; ``variance`` ("beta",
         "posterior") replaces the sampler's sigma_t^2 (None: the denoiser's own); ``eta`` samples by DDIM."""
@@ -54,7 +66,7 @@ def load_denoiser(name="denoiser_coma", variance="beta"):
     model, meta = load_checkpoint(name, "denoiser", lambda c: Denoiser(DenoiserConfig(**c)))
     training = meta["training"]
     diffusion = GaussianDiffusion(named_betas(training["schedule"], training["num_diffusion_steps"]), variance)
-    return TrainedDenoiser(model, LandmarkNormalizer.from_dict(meta["normalizer"]), diffusion, meta)
+    return TrainedDenoiser(model, LandmarkNormalizer.from_dict(meta["normalizer"]), diffusion, {**meta, "name": name})
 
 
 def check_n(n, name="n"):
@@ -120,23 +132,13 @@ def check_same_space(denoiser, guide):
         raise ValueError("guidance classifier and denoiser use different diffusion schedules")
 
 
-def check_ancestral(settings):
-    """Guided tasks sample with the ancestral DDPM step: Alg. 1-4 weigh the guidance by the step's variance,
-    which deterministic DDIM sets to zero.  A clear error for any other sampler."""
-    if settings.sampler != "ddpm":
-        raise ValueError(f"sampler {settings.sampler!r}: this task's guidance needs the ancestral DDPM step (its "
-                         f"variance weighs the guidance; DDIM's is eta^2 beta~_t); allowed: 'ddpm'. DDIM samples "
-                         f"unconditional sequences (sample unconditional --sampler ddim)")
-
-
 def guided_chain(guide, denoiser, settings):
     """The denoiser of the guide's dataset (or the given one, checked to share the guide's space) and its
-    chain for the task's settings (steps, variance)."""
-    check_ancestral(settings)
+    chain for the task's settings (steps, variance, sampler)."""
     denoiser = denoiser or load_denoiser(f"denoiser_{guide.dataset}")
     check_same_space(denoiser, guide)
     guide.model.to(denoiser.device)
-    return denoiser, denoiser.diffusion_with(settings.steps, settings.variance)
+    return denoiser, denoiser.diffusion_with(settings.steps, settings.variance, settings.ddim_eta)
 
 
 def task_settings(settings, overrides, n):

@@ -91,7 +91,7 @@ class DenoiserRecipe(Recipe):
             raise ValueError("the denoiser's schedule must match the training schedule")
         self.name = f"denoiser ({settings.dataset})"
         self.variable = not isinstance(settings.num_frames, int)
-        self.labels = torch.as_tensor(train.labels)
+        self.labels, self.label_names = torch.as_tensor(train.labels), list(train.label_names)
         self.normalizer = data.LandmarkNormalizer.fit(train)
         self.lengths = train.lengths
         x = torch.as_tensor(self.normalizer.normalize(train.landmarks))
@@ -126,8 +126,9 @@ class DenoiserRecipe(Recipe):
     def metadata(self, model):
         training = asdict(self.settings) | {"model": asdict(model.config)}
         training["num_frames"] = self.settings.num_frames if not self.variable else list(self.settings.num_frames)
+        labels = {"class_names": self.label_names} if self.architecture.num_classes else {}
         return {"training": training, "normalizer": self.normalizer.to_dict(), "torch_version": torch.__version__,
-                "data_dir": str(config.SYNTHETIC_DIR.name)}
+                "data_dir": str(config.SYNTHETIC_DIR.name), **labels}
 
     def checkpoint_name(self):
         return f"denoiser_{self.settings.dataset}" + ("_var" if self.variable else "") + (
