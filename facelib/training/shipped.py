@@ -30,6 +30,8 @@ SHIPPED = {
        for s in ("identity", "expression")},
 }
 if config.WORLD == 2:
+    # Issue 27: the label-conditional denoiser of classifier-free guidance (tasks.label_control(guidance="cfg")).
+    SHIPPED["denoiser_coma_cfg"] = ("denoiser", {"conditional": True})
     # Issue 25: Table 5 over three training seeds for ours, ours without attention and S2D (seed 0 is above).
     SHIPPED.update({f"deform_{m}_{s}_seed{k}": ("deformer", {"method": m, "split": s, "seed": k})
                     for m in ("ours", "no_attention", "s2d") for s in ("identity", "expression") for k in (1, 2)})
