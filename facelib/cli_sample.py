@@ -68,6 +68,8 @@ def add_parsers(sub):
     edit.set_defaults(func=run, task="edit", paper=False)
     edit.add_argument("--input", required=True, help=".npz whose 'landmarks' (F, 68, 3) or (n, F, 68, 3) in mm "
                       "holds the sequence(s) to edit")
+    edit.add_argument("--keep", default=None, help="frames kept as given, as 0-based ranges, e.g. 0:1 for the "
+                      "neutral frame of an N2E sequence (default: none; every frame is regenerated)")
     t["edit"] = edit
     for task in t:
         if task != "edit":
@@ -169,7 +171,7 @@ def run(args):
         landmarks, extra["texts"] = tasks.decoder_then_diffusion(args.text, n, settings, denoiser), [args.text] * n
     elif args.task == "edit":
         given = read_npz_array(args.input, ["landmarks"], "the sequences to edit")
-        landmarks = tasks.edit(tasks.check_sequences(given), args.label, settings, denoiser)
+        landmarks = tasks.edit(tasks.check_sequences(given), args.label, args.keep, settings, denoiser)
         extra["labels"] = [args.label] * len(landmarks)
     elif args.task == "fill":
         given = read_npz_array(args.input, ["landmarks"], "the sequence to fill")
@@ -186,7 +188,7 @@ def run(args):
             "guide": "" if cfg else GUIDES.get(args.task, "").format(settings.dataset),
             "adagrad_steps": config.ADAGRAD_STEPS, **asdict(settings),
             **({"scale": settings.guidance_scale} if hasattr(settings, "guidance_scale") else {}),
-            **{k: getattr(args, k) for k in ("label", "text", "input", "known", "neutral") if hasattr(args, k)}}
+            **{k: getattr(args, k) for k in ("label", "text", "input", "known", "neutral", "keep") if hasattr(args, k)}}
     np.savez(args.out, landmarks=landmarks.astype(np.float32), config=json.dumps(used),
              **{k: np.asarray(v) for k, v in extra.items()})
     print(f"wrote {args.out}: landmarks {landmarks.shape} float32 (mm); config {used}")

@@ -275,25 +275,27 @@ class GaussianDiffusion:
                 callback(t, x, out)
         return x
 
-    def invert(self, model, x0, mask=None, progress=False, refine=0):
+    def invert(self, model, x0, mask=None, progress=False, refine=0, trajectory=False):
         """DDIM inversion: x_0 -> x_T by the deterministic DDIM step run forwards, x_t = sqrt(abar_t) x0_hat +
         sqrt(1 - abar_t) eps.  The step from x_t back to x_{t-1} reads eps_theta(x_t, t), which is not known
         before x_t is: the usual inversion takes it at x_{t-1} (an error of first order in the step), and
         ``refine`` fixed-point iterations then re-read it at the x_t found, so that the DDIM step from x_t lands
         on x_{t-1} again (Pan et al. 2023, AIDI).  ``run`` with eta = 0 on this chain brings x_T back to x_0;
-        regenerating it with guidance edits x_0 keeping what x_T encodes."""
+        regenerating it with guidance edits x_0 keeping what x_T encodes.  ``trajectory``: return every x_t,
+        t = 0..T, instead of x_T alone."""
         if isinstance(refine, bool) or not isinstance(refine, (int, np.integer)) or refine < 0:
             raise ValueError(f"refine must be a number of fixed-point iterations >= 0, got {refine!r}")
-        net, x = self.wrap(model), x0
+        net, path = self.wrap(model), [x0]
         with torch.no_grad():
             for t in tqdm(range(1, self.num_steps + 1), desc="inverting", disable=not progress, leave=False):
+                x = path[-1]
                 abar_prev, abar = _extract(self.alphas_bar_prev, t, x), _extract(self.alphas_bar, t, x)
                 xt = x
                 for _ in range(1 + refine):
                     eps = net(xt, t, mask)
                     xt = abar.sqrt() * (x - (1.0 - abar_prev).sqrt() * eps) / abar_prev.sqrt() + (1.0 - abar).sqrt() * eps
-                x = xt
-        return x
+                path.append(xt)
+        return path if trajectory else path[-1]
 
     # ----------------------------------------------------------------------------- training
     def training_loss(self, model, x0, t=None, generator=None, mask=None, eps=None, **model_inputs):

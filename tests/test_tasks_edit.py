@@ -84,6 +84,18 @@ def test_edit_changes_the_expression_and_refuses_bad_input(denoiser, coma_test):
         tasks.edit(x, ["mouth_open"], **kwargs)
     with pytest.raises(ValueError, match="no --paper version"):
         config.Edit().paper()
+    with pytest.raises(ValueError, match="outside 0:40"):
+        tasks.edit(x, "mouth_open", keep="38:41", **kwargs)
+
+
+def test_edit_keeps_the_frames_asked_for_and_regenerates_the_others(denoiser, coma_test):
+    x = coma_test.landmarks[:2]
+    kwargs = dict(steps=6, denoiser=denoiser, progress=False)
+    kept = tasks.edit(x, "mouth_open", keep="0:1", **kwargs)
+    np.testing.assert_array_equal(kept[:, 0], x[:, 0].astype(np.float32))
+    assert np.abs(kept[:, 1:] - x[:, 1:]).max() > 0.5
+    # the kept frame follows its inversion path: with no guidance pull the chain is the plain regeneration
+    assert np.abs(kept[:, 1:] - tasks.edit(x, "mouth_open", **kwargs)[:, 1:]).max() > 0
 
 
 def test_edit_with_classifier_free_guidance_inverts_with_the_free_model(tiny_cfg, coma_test):

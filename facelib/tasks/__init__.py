@@ -15,7 +15,7 @@ printed algorithm, ``.fast()`` a few steps) and ``overrides`` change single fiel
 ``tasks.label_control("high_smile", 16, steps=100)``.
 """
 from .decoder import decoder_then_diffusion
-from .edit import check_sequences, edit, invert
+from .edit import check_sequences, edit, invert, keep_on_path
 from .fill import fill
 from .geometry import geometry_adaptive, geometry_passes, order_sensitive_label, table4_inputs
 from .label import adagrad_lr, check_labels, label_control, label_sampler, step_scaled_lr, table1_generators
@@ -23,7 +23,7 @@ from .loading import TrainedDenoiser, TrainedGuide, check_same_space, load_denoi
 from .text import text_control, text_guidance_weight, text_lr, text_score
 from .unconditional import unconditional
 
-__all__ = ["decoder_then_diffusion", "check_sequences", "edit", "invert", "check_labels", "label_sampler", "table1_generators", "fill", "geometry_adaptive", "geometry_passes", "order_sensitive_label", "table4_inputs",
+__all__ = ["decoder_then_diffusion", "check_sequences", "edit", "invert", "keep_on_path", "check_labels", "label_sampler", "table1_generators", "fill", "geometry_adaptive", "geometry_passes", "order_sensitive_label", "table4_inputs",
            "adagrad_lr", "label_control", "step_scaled_lr", "TrainedDenoiser", "TrainedGuide", "check_same_space",
            "load_denoiser", "load_guide", "load_text_head", "text_control", "text_guidance_weight", "text_lr",
            "text_score", "unconditional"]

@@ -13,6 +13,7 @@ import torch
 
 from ..config import Edit
 from ..guidance import ClassifierFree
+from ..inpainting import check_known_mask, keep_known, parse_known
 from .label import check_labels, label_sampler
 from .loading import task_settings
 
@@ -28,24 +29,44 @@ def check_sequences(sequences):
     return x[None] if x.ndim == 3 else x
 
 
-def invert(denoiser, sequences, settings=Edit(), model=None, progress=False):
+def invert(denoiser, sequences, settings=Edit(), model=None, progress=False, trajectory=False):
     """x_T of each sequence (n, F, 68, 3) in mm under the chain of ``settings`` (DDIM inversion), normalised;
-    ``model``: the eps network to invert with (default the denoiser's own)."""
+    ``model``: the eps network to invert with (default the denoiser's own); ``trajectory``: every x_t, t = 0..K."""
     diffusion = denoiser.diffusion_with(settings.steps, settings.variance, 0.0)
     x0 = torch.as_tensor(denoiser.normalizer.normalize(check_sequences(sequences)), dtype=torch.float32)
-    return diffusion.invert(model or denoiser.model, x0.to(denoiser.device), progress=progress, refine=settings.refine)
+    return diffusion.invert(model or denoiser.model, x0.to(denoiser.device), progress=progress, refine=settings.refine,
+                            trajectory=trajectory)
 
 
-def edit(sequences, label, settings=Edit(), denoiser=None, guide=None, progress=True, **overrides):
+def keep_on_path(path, kept, inner=None):
+    """A sampler hook: x_{t-1} from the hook ``inner`` (None: the sampler's), its ``kept`` frames (n, F) taken from
+    the inversion path ``path`` (x_t for t = 0..K) instead: they end where they began, and the chain fills the
+    other frames around them (Alg. 3's known frames, with the inverted noise in place of a fresh draw)."""
+    def hook(x_hat, xt, t, out):
+        x = inner(x_hat, xt, t, out) if inner is not None else x_hat
+        return torch.where(kept[:, :, None, None], path[t - 1], x)
+    return hook
+
+
+def edit(sequences, label, keep=None, settings=Edit(), denoiser=None, guide=None, progress=True, **overrides):
     """``sequences`` (F, 68, 3) or (n, F, 68, 3) in mm, each regenerated from its DDIM inversion with label
     guidance towards ``label`` (a name, or one per sequence): (n, F, 68, 3) float32 in mm.
 
-    settings: :class:`facelib.config.Edit` (a :class:`facelib.config.LabelControl` on a DDIM chain of 100
-    steps).  Classifier-free guidance inverts with the conditional denoiser told "no label"."""
+    keep: frames returned as given (e.g. the neutral one), as ranges "0:1" or a mask (F,) or (n, F); they follow
+    their own inversion path while the others are regenerated.  settings: :class:`facelib.config.Edit` (a
+    :class:`facelib.config.LabelControl` on a DDIM chain of 100 steps).  Classifier-free guidance inverts with
+    the conditional denoiser told "no label"."""
     x = check_sequences(sequences)
     settings, _ = task_settings(settings, {**overrides, "num_frames": x.shape[1]}, len(x))
     labels = check_labels(label, len(x))
+    kept = None
+    if keep is not None:
+        kept = parse_known(keep, x.shape[1]) if isinstance(keep, str) else check_known_mask(keep, x.shape[1])
+        kept = np.broadcast_to(kept, x.shape[:2]).copy()
     denoiser, diffusion, model, hook = label_sampler(labels, settings, denoiser, guide)
     free = ClassifierFree(model.denoiser, model.labels, 0.0) if isinstance(model, ClassifierFree) else model
-    xT = invert(denoiser, x, settings, free, progress)
-    return denoiser.to_mm(diffusion.run(model, xT, settings.seed, guide=hook, progress=progress))
+    path = invert(denoiser, x, settings, free, progress, trajectory=True)
+    if kept is not None:
+        hook = keep_on_path(path, torch.as_tensor(kept).to(denoiser.device), hook)
+    edited = denoiser.to_mm(diffusion.run(model, path[-1], settings.seed, guide=hook, progress=progress))
+    return edited if kept is None else keep_known(edited, x, kept)

@@ -1,0 +1,201 @@
+"""Fewer steps and guidance without a classifier (issue 27): DDIM against respaced DDPM, classifier-free against
+classifier guidance, and editing by DDIM inversion, on coma.
+
+Usage: python benchmarks/fast_sampling.py [--experiment steps|guidance|edit] [--n N] [--save NAME]
+steps (default): unconditional sampling and label control (Alg. 1) with the ancestral DDPM step and with DDIM
+    (eta = 0) on chains of 10, 20, 50, 100, 200 and 2000 steps: seconds per sequence, IC accuracy, FID and
+    diversity with 95 % bootstrap intervals (n = 48 sequences, the labels in equal numbers).
+guidance: classifier guidance (Alg. 1, the unconditional denoiser and guide_coma_I) against classifier-free
+    guidance (denoiser_coma_cfg) at several weights w, each with DDPM and DDIM on 50 and 200 steps: accuracy, FID,
+    diversity, seconds per sequence and the peak memory of sampling (each row in a fresh process: its peak
+    resident memory above what loading the models took).
+edit: DDIM inversion of the first n = 32 test sequences at 100 steps (refine 0, 1, 2: the reconstruction error in
+    mm), then editing each towards another label (the IC's reading of the new label, the neutral frame's
+    drift in mm, the correlation of the motion's timing with the original's), by Alg. 1, the mean shift and
+    classifier-free guidance, each regenerating every frame or keeping the neutral one (then the drift is that
+    of the frame next to it).
+--save NAME writes the table to results/NAME.json (facelib.results: provenance, checkpoint hashes).
+"""
+import argparse
+import multiprocessing
+import os
+import resource
+import time
+
+import numpy as np
+import torch
+
+from facelib import config, data, evaluation, results, tasks
+
+STEPS = [10, 20, 50, 100, 200, 2000]
+CFG_SCALES = [1.0, 1.5, 2.5, 4.0]
+SCORE_COLUMNS = ["Acc (%)", "95 % interval", "FID", "95 % interval", "diversity", "95 % interval"]
+
+
+def scored(ev, x, targets):
+    s = ev.score(x, targets, intervals=True)
+    return [s["accuracy"], list(s["accuracy_ci"]), s["fid"], list(s["fid_ci"]), s["diversity"],
+            list(s["diversity_ci"])]
+
+
+def balanced_labels(ev, n):
+    """n labels cycling through the IC's classes, and their class indices."""
+    labels = [ev.class_names[i % len(ev.class_names)] for i in range(n)]
+    return labels, np.array([ev.class_index(y) for y in labels])
+
+
+def steps_experiment(args, ev):
+    labels, targets = balanced_labels(ev, args.n)
+    denoiser, guide = tasks.load_denoiser("denoiser_coma"), tasks.load_guide("coma")
+    rows = []
+    for task in ("unconditional", "label control (Alg. 1)"):
+        for sampler in ("ddpm", "ddim"):
+            for steps in args.steps:
+                common = dict(steps=steps, seed=0, sampler=sampler, denoiser=denoiser, progress=False)
+                t0 = time.perf_counter()
+                if task == "unconditional":
+                    x = tasks.unconditional(args.n, **common)
+                else:
+                    x = tasks.label_control(labels, args.n, guide=guide, **common)
+                dt = time.perf_counter() - t0
+                # unconditional sequences have no target: the IC's own reading stands in (accuracy 100 by design)
+                y = ev.features(x).argmax(1) if task == "unconditional" else targets
+                rows.append([task, sampler, steps, round(dt / args.n, 3), *scored(ev, x, y)])
+                print(f"{task:>24} {sampler:>5} {steps:>5} {rows[-1][3]:>8.3f} s/seq  Acc {rows[-1][4]:5.1f}  "
+                      f"FID {rows[-1][6]:6.2f}", flush=True)
+    return ["task", "sampler", "steps", "s per sequence"] + SCORE_COLUMNS, rows
+
+
+def _sample_in_child(kind, labels, steps, sampler, scale, threads):
+    """One guided run in a fresh process: (sequences, seconds, peak memory of sampling above loading in MiB)."""
+    torch.set_num_threads(threads)
+    if kind == "classifier":
+        models = dict(denoiser=tasks.load_denoiser("denoiser_coma"), guide=tasks.load_guide("coma"))
+    else:
+        models = dict(denoiser=tasks.load_denoiser("denoiser_coma_cfg"), guidance="cfg", scale=scale)
+    loaded = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    t0 = time.perf_counter()
+    x = tasks.label_control(labels, len(labels), steps=steps, seed=0, sampler=sampler, progress=False, **models)
+    seconds = time.perf_counter() - t0
+    return x, seconds, (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - loaded) / 1024
+
+
+def guidance_experiment(args, ev):
+    labels, targets = balanced_labels(ev, args.n)
+    runs = [("classifier guidance (Alg. 1)", "classifier", None)]
+    runs += [(f"classifier-free, w = {w:g}", "cfg", w) for w in CFG_SCALES]
+    rows = []
+    context = multiprocessing.get_context("spawn")
+    for steps in (50, 200):
+        for sampler in ("ddpm", "ddim"):
+            for name, kind, scale in runs:
+                with context.Pool(1) as pool:
+                    x, seconds, peak = pool.apply(_sample_in_child, (kind, labels, steps, sampler, scale,
+                                                                     torch.get_num_threads()))
+                rows.append([name, sampler, steps, round(seconds / args.n, 3), round(peak, 1),
+                             *scored(ev, x, targets)])
+                print(f"{name:>30} {sampler:>5} {steps:>4} {rows[-1][3]:>7.3f} s/seq {peak:7.1f} MiB  "
+                      f"Acc {rows[-1][5]:5.1f}  FID {rows[-1][7]:6.2f}", flush=True)
+    return ["guidance", "sampler", "steps", "s per sequence", "peak memory (MiB)"] + SCORE_COLUMNS, rows
+
+
+def neutral_frames(x, kinds):
+    """The neutral frame of each sequence: the first for N2E, the last for E2N."""
+    return np.stack([s[0] if data.KIND_NAMES[k] == "N2E" else s[-1] for s, k in zip(x, kinds)])
+
+
+def next_to_neutral(x, kinds):
+    """The frame next to the neutral one: the second for N2E, the last but one for E2N."""
+    return np.stack([s[1] if data.KIND_NAMES[k] == "N2E" else s[-2] for s, k in zip(x, kinds)])
+
+
+def timing_correlation(a, b, kinds):
+    """Pearson r between the motion profiles (mean landmark distance from the neutral frame, per frame) of
+    each pair of sequences."""
+    def profile(x):
+        return np.linalg.norm(x - neutral_frames(x, kinds)[:, None], axis=-1).mean(-1)
+    pa, pb = profile(a), profile(b)
+    return np.array([np.corrcoef(u, v)[0, 1] for u, v in zip(pa, pb)])
+
+
+def edit_experiment(args, ev):
+    test = data.load_dataset("coma", "test")
+    pick = np.arange(min(args.n, len(test)))
+    x, kinds, own = test.landmarks[pick], test.kinds[pick], test.labels[pick]
+    names = ev.class_names
+    others = [[j for j in range(len(names)) if j != y] for y in own]
+    new = np.array([o[i % len(o)] for i, o in enumerate(others)])  # another label for each, all used
+    denoiser = tasks.load_denoiser("denoiser_coma")
+    rows = []
+    for refine in (0, 1, 2):
+        chain = denoiser.diffusion_with(100, eta=0.0)
+        back = denoiser.to_mm(chain.run(denoiser.model, tasks.invert(denoiser, x, config.Edit(refine=refine)),
+                                        progress=False))
+        rmse = np.sqrt(((back - x) ** 2).sum(-1).mean((1, 2)))
+        rows.append(["inversion, then regeneration", f"refine {refine}", 100, *np.percentile(rmse, [50, 90, 100]),
+                     "", "", "", ""])
+        print(f"inversion refine {refine}: RMSE median {rows[-1][3]:.4f} mm, p90 {rows[-1][4]:.4f}, "
+              f"max {rows[-1][5]:.4f}", flush=True)
+    keep = np.zeros(x.shape[:2], dtype=bool)  # the neutral frame of each sequence
+    keep[:, 0], keep[:, -1] = kinds == data.KIND_NAMES.index("N2E"), kinds == data.KIND_NAMES.index("E2N")
+    edits = [(f"edit, {name}{', neutral frame kept' if kept else ''}", dict(kwargs, keep=keep if kept else None))
+             for name, kwargs in [("classifier guidance (Alg. 1)", {}),
+                                  (f"mean shift (scale {args.mean_shift_scale:g})",
+                                   {"method": "mean_shift", "scale": args.mean_shift_scale}),
+                                  (f"classifier-free (w = {config.CFG_SCALE:g})", {"guidance": "cfg"})]
+             for kept in (False, True)]
+    for name, kwargs in edits:
+        t0 = time.perf_counter()
+        edited = tasks.edit(x, [names[j] for j in new], progress=False, **kwargs)
+        dt = time.perf_counter() - t0
+        # the neutral frame's drift; with the neutral frame kept, that of the frame next to it
+        near = neutral_frames(edited, kinds) if kwargs["keep"] is None else next_to_neutral(edited, kinds)
+        drift = np.linalg.norm(near - (neutral_frames(x, kinds) if kwargs["keep"] is None else
+                                       next_to_neutral(x, kinds)), axis=-1)
+        drift = np.sqrt((drift ** 2).mean(-1))
+        s = ev.score(edited, new, intervals=True)
+        r = timing_correlation(x, edited, kinds)
+        rows.append([name, "", 100, *np.percentile(drift, [50, 90, 100]), s["accuracy"], list(s["accuracy_ci"]),
+                     float(np.median(r)), round(dt / len(x), 3)])
+        print(f"{name}: neutral drift median {rows[-1][3]:.3f} mm (max {rows[-1][5]:.3f}); IC reads the new label "
+              f"{s['accuracy']:.1f} %; timing r median {rows[-1][8]:.3f}", flush=True)
+    return ["run", "setting", "steps", "median (mm)", "90th percentile (mm)", "max (mm)",
+            "new label read (%)", "95 % interval", "timing r (median)", "s per sequence"], rows
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--experiment", choices=["steps", "guidance", "edit"], default="steps")
+    parser.add_argument("--n", type=int, default=None, help="sequences per row (steps, guidance: 48; edit: 32)")
+    parser.add_argument("--steps", type=int, nargs="+", default=STEPS, help=f"steps: the chains' lengths (default "
+                        f"{' '.join(map(str, STEPS))})")
+    parser.add_argument("--mean-shift-scale", type=float, default=10.0, help="edit: the mean-shift rows' scale")
+    parser.add_argument("--save", metavar="NAME", default=None, help="write the table to results/NAME.json")
+    args = parser.parse_args()
+    args.n = args.n or (32 if args.experiment == "edit" else 48)
+    if args.n < 2:
+        parser.error(f"--n must be at least 2 (intervals are bootstrapped over the sequences), got {args.n}")
+    experiment = {"steps": steps_experiment, "guidance": guidance_experiment, "edit": edit_experiment}[args.experiment]
+    print(f"cores: {os.cpu_count()}, torch threads: {torch.get_num_threads()}, experiment: {args.experiment}, "
+          f"n = {args.n}", flush=True)
+    t0 = time.perf_counter()
+    ev = evaluation.load_evaluator("coma", "I")
+    columns, rows = experiment(args, ev)
+    if args.save:
+        checkpoints = ["denoiser_coma", "guide_coma_I", "ic_coma_I"]
+        checkpoints += [] if args.experiment == "steps" else ["denoiser_coma_cfg"]
+        titles = {"steps": "DDIM against respaced DDPM: quality against the number of steps (coma)",
+                  "guidance": "Classifier guidance (Alg. 1) against classifier-free guidance (coma)",
+                  "edit": "DDIM inversion and editing of test sequences (coma)"}
+        steps = {"steps": args.steps, "guidance": [50, 200], "edit": [100]}[args.experiment]
+        path = results.save_result(
+            args.save, title=titles[args.experiment], columns=columns, rows=rows,
+            run=results.Run(checkpoints=checkpoints, seeds=[0], n=args.n, steps=steps,
+                            wall_time_s=time.perf_counter() - t0),
+            notes="intervals: 95 % bootstrap over the sequences (Evaluator.score); FID against the training split "
+                  f"from n sequences; DDIM at eta = 0; label control with the book's defaults (config.LabelControl)")
+        print(f"saved {path}")
+
+
+if __name__ == "__main__":
+    main()
