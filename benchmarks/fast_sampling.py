@@ -17,9 +17,9 @@ edit: DDIM inversion of the first n = 32 test sequences at 100 steps (refine 0, 
 --save NAME writes the table to results/NAME.json (facelib.results: provenance, checkpoint hashes).
 """
 import argparse
+import gc
 import multiprocessing
 import os
-import resource
 import time
 
 import numpy as np
@@ -58,26 +58,37 @@ def steps_experiment(args, ev):
                 else:
                     x = tasks.label_control(labels, args.n, guide=guide, **common)
                 dt = time.perf_counter() - t0
-                # unconditional sequences have no target: the IC's own reading stands in (accuracy 100 by design)
-                y = ev.features(x).argmax(1) if task == "unconditional" else targets
-                rows.append([task, sampler, steps, round(dt / args.n, 3), *scored(ev, x, y)])
-                print(f"{task:>24} {sampler:>5} {steps:>5} {rows[-1][3]:>8.3f} s/seq  Acc {rows[-1][4]:5.1f}  "
+                scores = scored(ev, x, ev.features(x).argmax(1) if task == "unconditional" else targets)
+                if task == "unconditional":  # no target: no accuracy
+                    scores[:2] = ["", ""]
+                rows.append([task, sampler, steps, round(dt / args.n, 3), *scores])
+                print(f"{task:>24} {sampler:>5} {steps:>5} {rows[-1][3]:>8.3f} s/seq  Acc {rows[-1][4]}  "
                       f"FID {rows[-1][6]:6.2f}", flush=True)
     return ["task", "sampler", "steps", "s per sequence"] + SCORE_COLUMNS, rows
 
 
+def _memory_kib(field):
+    """A field of /proc/self/status in KiB (VmRSS: resident now; VmHWM: the peak since the last reset)."""
+    with open("/proc/self/status") as f:
+        return next(int(line.split()[1]) for line in f if line.startswith(field + ":"))
+
+
 def _sample_in_child(kind, labels, steps, sampler, scale, threads):
-    """One guided run in a fresh process: (sequences, seconds, peak memory of sampling above loading in MiB)."""
+    """One guided run in a fresh process (CPU): (sequences, seconds, the peak resident memory of sampling above the
+    memory the loaded models hold, MiB).  The peak is reset after loading (Linux: /proc/self/clear_refs)."""
     torch.set_num_threads(threads)
     if kind == "classifier":
         models = dict(denoiser=tasks.load_denoiser("denoiser_coma"), guide=tasks.load_guide("coma"))
     else:
         models = dict(denoiser=tasks.load_denoiser("denoiser_coma_cfg"), guidance="cfg", scale=scale)
-    loaded = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    gc.collect()
+    with open("/proc/self/clear_refs", "w") as f:
+        f.write("5")  # resets VmHWM to the present VmRSS
+    loaded = _memory_kib("VmRSS")
     t0 = time.perf_counter()
     x = tasks.label_control(labels, len(labels), steps=steps, seed=0, sampler=sampler, progress=False, **models)
     seconds = time.perf_counter() - t0
-    return x, seconds, (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - loaded) / 1024
+    return x, seconds, (_memory_kib("VmHWM") - loaded) / 1024
 
 
 def guidance_experiment(args, ev):
@@ -109,6 +120,11 @@ def next_to_neutral(x, kinds):
     return np.stack([s[1] if data.KIND_NAMES[k] == "N2E" else s[-2] for s, k in zip(x, kinds)])
 
 
+def rms_mm(a, b):
+    """Root mean square over the landmarks of the distance between landmark sets (..., 68, 3), in mm."""
+    return np.sqrt((np.linalg.norm(a - b, axis=-1) ** 2).mean(-1))
+
+
 def timing_correlation(a, b, kinds):
     """Pearson r between the motion profiles (mean landmark distance from the neutral frame, per frame) of
     each pair of sequences."""
@@ -119,48 +135,57 @@ def timing_correlation(a, b, kinds):
 
 
 def edit_experiment(args, ev):
+    """Two tables in one: the inversion's reconstruction error, and the edits' measures (columns left blank
+    where a measure does not apply)."""
     test = data.load_dataset("coma", "test")
     pick = np.arange(min(args.n, len(test)))
     x, kinds, own = test.landmarks[pick], test.kinds[pick], test.labels[pick]
     names = ev.class_names
     others = [[j for j in range(len(names)) if j != y] for y in own]
     new = np.array([o[i % len(o)] for i, o in enumerate(others)])  # another label for each, all used
-    denoiser = tasks.load_denoiser("denoiser_coma")
+    models = dict(denoiser=tasks.load_denoiser("denoiser_coma"), guide=tasks.load_guide("coma"))
+    cfg_models = dict(denoiser=tasks.load_denoiser("denoiser_coma_cfg"), guidance="cfg")
+    blank = [""] * 7  # the edit columns
     rows = []
     for refine in (0, 1, 2):
-        chain = denoiser.diffusion_with(100, eta=0.0)
-        back = denoiser.to_mm(chain.run(denoiser.model, tasks.invert(denoiser, x, config.Edit(refine=refine)),
-                                        progress=False))
+        den = models["denoiser"]
+        chain = den.diffusion_with(100, eta=0.0)
+        back = den.to_mm(chain.run(den.model, tasks.invert(den, x, config.Edit(refine=refine)), progress=False))
         rmse = np.sqrt(((back - x) ** 2).sum(-1).mean((1, 2)))
-        rows.append(["inversion, then regeneration", f"refine {refine}", 100, *np.percentile(rmse, [50, 90, 100]),
-                     "", "", "", ""])
-        print(f"inversion refine {refine}: RMSE median {rows[-1][3]:.4f} mm, p90 {rows[-1][4]:.4f}, "
-              f"max {rows[-1][5]:.4f}", flush=True)
+        rows.append(["inversion, then regeneration", f"refine {refine}", *np.percentile(rmse, [50, 90, 100]),
+                     *blank])
+        print(f"inversion refine {refine}: RMSE median {rows[-1][2]:.4f} mm, p90 {rows[-1][3]:.4f}, "
+              f"max {rows[-1][4]:.4f}", flush=True)
+    # what unrelated sequences share: the timing r of each test sequence with another of the same kind
+    partner = np.array([next(j for j in np.roll(pick, -1 - i) if kinds[j] == kinds[i]) for i in pick])
+    r_unrelated = float(np.median(timing_correlation(x, test.landmarks[partner], kinds)))
+    rows.append(["two different test sequences of the same order", "", *[""] * 8, r_unrelated, ""])
     keep = np.zeros(x.shape[:2], dtype=bool)  # the neutral frame of each sequence
     keep[:, 0], keep[:, -1] = kinds == data.KIND_NAMES.index("N2E"), kinds == data.KIND_NAMES.index("E2N")
-    edits = [(f"edit, {name}{', neutral frame kept' if kept else ''}", dict(kwargs, keep=keep if kept else None))
-             for name, kwargs in [("classifier guidance (Alg. 1)", {}),
-                                  (f"mean shift (scale {args.mean_shift_scale:g})",
-                                   {"method": "mean_shift", "scale": args.mean_shift_scale}),
-                                  (f"classifier-free (w = {config.CFG_SCALE:g})", {"guidance": "cfg"})]
-             for kept in (False, True)]
-    for name, kwargs in edits:
-        t0 = time.perf_counter()
-        edited = tasks.edit(x, [names[j] for j in new], progress=False, **kwargs)
-        dt = time.perf_counter() - t0
-        # the neutral frame's drift; with the neutral frame kept, that of the frame next to it
-        near = neutral_frames(edited, kinds) if kwargs["keep"] is None else next_to_neutral(edited, kinds)
-        drift = np.linalg.norm(near - (neutral_frames(x, kinds) if kwargs["keep"] is None else
-                                       next_to_neutral(x, kinds)), axis=-1)
-        drift = np.sqrt((drift ** 2).mean(-1))
-        s = ev.score(edited, new, intervals=True)
-        r = timing_correlation(x, edited, kinds)
-        rows.append([name, "", 100, *np.percentile(drift, [50, 90, 100]), s["accuracy"], list(s["accuracy_ci"]),
-                     float(np.median(r)), round(dt / len(x), 3)])
-        print(f"{name}: neutral drift median {rows[-1][3]:.3f} mm (max {rows[-1][5]:.3f}); IC reads the new label "
-              f"{s['accuracy']:.1f} %; timing r median {rows[-1][8]:.3f}", flush=True)
-    return ["run", "setting", "steps", "median (mm)", "90th percentile (mm)", "max (mm)",
-            "new label read (%)", "95 % interval", "timing r (median)", "s per sequence"], rows
+    runs = [("classifier guidance (Alg. 1)", models),
+            (f"mean shift (scale {args.mean_shift_scale:g})",
+             dict(models, method="mean_shift", scale=args.mean_shift_scale)),
+            (f"classifier-free (w = {config.CFG_SCALE:g})", cfg_models)]
+    for name, kwargs in runs:
+        for kept in (False, True):
+            t0 = time.perf_counter()
+            edited = tasks.edit(x, [names[j] for j in new], keep=keep if kept else None, progress=False, **kwargs)
+            dt = time.perf_counter() - t0
+            drift = rms_mm(neutral_frames(edited, kinds), neutral_frames(x, kinds))
+            # the seam at the kept frame: how far the first regenerated frame moves from it, against the original
+            seam = rms_mm(next_to_neutral(edited, kinds), neutral_frames(edited, kinds)) - rms_mm(
+                next_to_neutral(x, kinds), neutral_frames(x, kinds))
+            s = ev.score(edited, new, intervals=True)
+            r = timing_correlation(x, edited, kinds)
+            rows.append([f"edit, {name}", "neutral frame kept" if kept else "every frame regenerated", "", "", "",
+                         float(np.median(drift)), float(np.max(drift)), float(np.median(seam)), s["accuracy"],
+                         list(s["accuracy_ci"]), float(np.median(r)), round(dt / len(x), 3)])
+            print(f"{rows[-1][0]}, {rows[-1][1]}: neutral drift median {rows[-1][5]:.3f} mm, seam "
+                  f"{rows[-1][7]:+.3f} mm; IC reads the new label {s['accuracy']:.1f} %; timing r {rows[-1][10]:.3f}",
+                  flush=True)
+    return ["run", "setting", "RMSE median (mm)", "RMSE 90th percentile (mm)", "RMSE max (mm)",
+            "neutral drift median (mm)", "neutral drift max (mm)", "seam change median (mm)", "new label read (%)",
+            "95 % interval", "timing r (median)", "s per sequence"], rows
 
 
 def main():
@@ -173,13 +198,15 @@ def main():
     parser.add_argument("--save", metavar="NAME", default=None, help="write the table to results/NAME.json")
     args = parser.parse_args()
     args.n = args.n or (32 if args.experiment == "edit" else 48)
-    if args.n < 2:
-        parser.error(f"--n must be at least 2 (intervals are bootstrapped over the sequences), got {args.n}")
+    if args.n < 24:  # two per class: multimodality and the intervals need them
+        parser.error(f"--n must be at least 24 (two sequences of each of the 12 labels), got {args.n}")
     experiment = {"steps": steps_experiment, "guidance": guidance_experiment, "edit": edit_experiment}[args.experiment]
     print(f"cores: {os.cpu_count()}, torch threads: {torch.get_num_threads()}, experiment: {args.experiment}, "
           f"n = {args.n}", flush=True)
     t0 = time.perf_counter()
     ev = evaluation.load_evaluator("coma", "I")
+    if args.experiment != "steps":
+        tasks.load_denoiser("denoiser_coma_cfg")  # fail now, not after the classifier rows
     columns, rows = experiment(args, ev)
     if args.save:
         checkpoints = ["denoiser_coma", "guide_coma_I", "ic_coma_I"]

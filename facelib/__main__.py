@@ -189,7 +189,7 @@ def main(argv=None):
     args = parser.parse_args(argv)
     try:
         return args.func(args)
-    except ValueError as e:
+    except (ValueError, FileNotFoundError) as e:  # bad input, a checkpoint not trained yet: a message, no traceback
         parser.error(str(e))
 
 

@@ -60,37 +60,31 @@ def add_parsers(sub):
         _option(t[task], task, "num_frames", "frames per sequence", "--length", type=int)
         _option(t[task], task, "seed", "the random seed", type=int)
         _option(t[task], task, "dataset", "the data the networks were trained on", choices=list(data.DATASET_NAMES))
-        _option(t[task], task, "variance", "the sampler's sigma_t^2: beta_t (the paper's) or the posterior beta~_t",
-                choices=["beta", "posterior"])
+        _option(t[task], task, "variance", "the DDPM sampler's sigma_t^2: beta_t (the paper's) or the posterior "
+                "beta~_t (DDIM's is eta^2 beta~_t)", choices=["beta", "posterior"])
+        _option(t[task], task, "sampler", "the reverse step: DDPM's ancestral step (Eq. 5) or DDIM's",
+                choices=list(config.SAMPLERS))
+        _option(t[task], task, "eta", "DDIM's noise, in [0, 1] (0: deterministic)", type=float)
         t[task].set_defaults(func=run)
-    edit = sub.add_parser("edit", parents=[io], help="change the expression of a given sequence: DDIM "
-                          "inversion, then label control (not in the paper)", description=EDIT)
+    t["edit"] = edit = sub.add_parser("edit", parents=[io], help="change the expression of a given sequence: DDIM "
+                                      "inversion, then label control (not in the paper)", description=EDIT)
     edit.set_defaults(func=run, task="edit", paper=False)
     edit.add_argument("--input", required=True, help=".npz whose 'landmarks' (F, 68, 3) or (n, F, 68, 3) in mm "
                       "holds the sequence(s) to edit")
     edit.add_argument("--keep", default=None, help="frames kept as given, as 0-based ranges, e.g. 0:1 for the "
                       "neutral frame of an N2E sequence (default: none; every frame is regenerated)")
-    t["edit"] = edit
-    for task in t:
-        if task != "edit":
-            _option(t[task], task, "sampler", "the reverse step: DDPM's ancestral step (Eq. 5) or DDIM's",
-                    choices=list(config.SAMPLERS))
-        _option(t[task], task, "eta", "DDIM's noise, in [0, 1] (0: deterministic)", type=float)
-    for task in ("edit",):
-        _option(t[task], task, "steps", "reverse steps, respaced from T = 2000 (inversion and regeneration)",
-                type=int)
-        _option(t[task], task, "seed", "the random seed (eta > 0)", type=int)
-        _option(t[task], task, "refine", "fixed-point iterations per inversion step (0: the plain DDIM inversion)",
-                type=int)
-        _option(t[task], task, "dataset", "the data the networks were trained on", choices=list(data.DATASET_NAMES))
+    _option(edit, "edit", "steps", "reverse steps, respaced from T = 2000 (inversion and regeneration)", type=int)
+    _option(edit, "edit", "refine", "fixed-point iterations per inversion step (0: the plain DDIM inversion)",
+            type=int)
+    _option(edit, "edit", "dataset", "the data the networks were trained on", choices=list(data.DATASET_NAMES))
     for task in ("label", "edit", "text", "geometry"):
         _option(t[task], task, "lr", "Adagrad learning rate of the guidance (None: the book's choice for the "
                 "dataset and the number of steps)", type=float)
-        _option(t[task], task, "guidance_weight", "lambda of Alg. 1-2 (None: the book's choice for the text score)",
-                type=float)
+        _option(t[task], task, "guidance_weight", "lambda of Alg. 1-2, the weight of log p_theta" +
+                (" (None: the book's choice for the text score)" if task == "text" else ""), type=float)
     for task in ("label", "edit", "geometry"):
-        t[task].add_argument("--label", required=True, help="an expression label of the dataset, e.g. high_smile "
-                             "(geometry: or 'mouth_open E2N')")
+        t[task].add_argument("--label", required=True, help="an expression label of the dataset, e.g. high_smile" +
+                             (" or 'mouth_open E2N'" if task == "geometry" else ""))
     for task in ("label", "edit"):
         _option(t[task], task, "guidance", "classifier: a noisy classifier steers the unconditional denoiser (the "
                 "paper's); cfg: classifier-free guidance of the label-conditional denoiser denoiser_<dataset>_cfg",
@@ -145,6 +139,8 @@ def settings_of(args):
     base = SETTINGS[args.task].paper() if args.paper else SETTINGS[args.task]
     settings = replace(base, **{f.name: getattr(args, f.name) for f in fields(base)
                                 if getattr(args, f.name, None) is not None})
+    if args.task in ("label", "edit") and settings.guidance == "cfg":
+        return settings  # classifier-free guidance has no classifier, no Adagrad rate
     if args.task in ("label", "edit") and settings.lr is None:
         settings = replace(settings, lr=tasks.adagrad_lr(settings.dataset, settings.steps))
     if args.task == "text" and settings.guidance_weight is None:
@@ -158,7 +154,8 @@ def run(args):
     settings = settings_of(args)
     cfg = getattr(settings, "guidance", None) == "cfg"
     checkpoint = args.checkpoint or f"denoiser_{settings.dataset}" + ("_cfg" if cfg else "")
-    denoiser = tasks.load_denoiser(checkpoint)
+    given = args.checkpoint is not None or not cfg
+    denoiser = tasks.load_denoiser(checkpoint) if given else tasks.load_conditional_denoiser(settings.dataset)
     denoiser.model.to(device_for(args.device))
     n, extra = getattr(args, "n", None), {}
     if args.task == "unconditional":
@@ -170,8 +167,9 @@ def run(args):
     elif args.task == "decoder":
         landmarks, extra["texts"] = tasks.decoder_then_diffusion(args.text, n, settings, denoiser), [args.text] * n
     elif args.task == "edit":
-        given = read_npz_array(args.input, ["landmarks"], "the sequences to edit")
-        landmarks = tasks.edit(tasks.check_sequences(given), args.label, args.keep, settings, denoiser)
+        given = tasks.check_sequences(read_npz_array(args.input, ["landmarks"], "the sequences to edit"))
+        settings = replace(settings, num_frames=given.shape[1])
+        landmarks = tasks.edit(given, args.label, args.keep, settings, denoiser)
         extra["labels"] = [args.label] * len(landmarks)
     elif args.task == "fill":
         given = read_npz_array(args.input, ["landmarks"], "the sequence to fill")
@@ -185,7 +183,7 @@ def run(args):
         landmarks = tasks.geometry_adaptive(neutral, extra["labels"], n, settings, denoiser)
     used = {"task": args.task, "paper": args.paper, "n": len(landmarks), "checkpoint": checkpoint,
             "checkpoint_sha256": denoiser.meta["sha256"],
-            "guide": "" if cfg else GUIDES.get(args.task, "").format(settings.dataset),
+            "guide": None if cfg else GUIDES.get(args.task, "").format(settings.dataset),
             "adagrad_steps": config.ADAGRAD_STEPS, **asdict(settings),
             **({"scale": settings.guidance_scale} if hasattr(settings, "guidance_scale") else {}),
             **{k: getattr(args, k) for k in ("label", "text", "input", "known", "neutral", "keep") if hasattr(args, k)}}

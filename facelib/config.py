@@ -449,7 +449,7 @@ class LabelControl(Sampling):
         return CFG_SCALE if self.guidance == "cfg" else MEAN_SHIFT_SCALE
 
     def paper(self):
-        return replace(super().paper(), guidance="classifier", method="adagrad")
+        return replace(super().paper(), guidance="classifier", method="adagrad", guidance_weight=GUIDANCE_WEIGHT)
 
 
 @dataclass(frozen=True)
@@ -460,14 +460,15 @@ class Edit(LabelControl):
     steps: int | None = 100  # issue 27: inversion at eta = 0 with 100 steps
     sampler: str = "ddim"  # inversion is DDIM's
     eta: float = 0.0
-    refine: int = 2  # fixed-point iterations per inversion step (GaussianDiffusion.invert): 3 forwards per step
+    refine: int = 2  # fixed-point iterations per inversion step (GaussianDiffusion.invert): 3 network calls per step
 
     def __post_init__(self):
         super().__post_init__()
         if isinstance(self.refine, bool) or not isinstance(self.refine, int) or self.refine < 0:
             raise ValueError(f"refine must be a number of fixed-point iterations >= 0, got {self.refine!r}")
-        if self.sampler != "ddim":
-            raise ValueError(f"editing inverts a sequence by DDIM: the sampler must be 'ddim', got {self.sampler!r}")
+        if self.sampler != "ddim" or self.eta != 0:
+            raise ValueError(f"editing inverts a sequence by deterministic DDIM and regenerates it on the same path: "
+                             f"the sampler must be 'ddim' with eta 0, got {self.sampler!r} with eta {self.eta!r}")
 
     def paper(self):
         raise ValueError("editing is not in the paper: there is no --paper version of it")

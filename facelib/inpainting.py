@@ -49,9 +49,14 @@ def check_known_mask(mask, num_frames=None):
 
 
 def parse_known(spec, num_frames):
+    """Parse known frames like "0:10,30:40" (:func:`parse_ranges`) into a checked known-frame mask (F,)."""
+    return check_known_mask(parse_ranges(spec, num_frames))
+
+
+def parse_ranges(spec, num_frames):
     """Parse frame ranges like "0:10,30:40" (Python slices, 0-based, end excluded) into a mask (F,)."""
     if not isinstance(spec, str) or not spec.strip():
-        raise ValueError(f"known frames must be ranges like '0:10,30:40', got {spec!r}")
+        raise ValueError(f"frames must be given as ranges like '0:10,30:40', got {spec!r}")
     mask = np.zeros(num_frames, dtype=bool)
     for part in spec.split(","):
         try:
@@ -61,7 +66,7 @@ def parse_known(spec, num_frames):
         if not 0 <= start < stop <= num_frames:
             raise ValueError(f"frame range {part.strip()!r} is outside 0:{num_frames} (start < stop required)")
         mask[start:stop] = True
-    return check_known_mask(mask)
+    return mask
 
 
 def fill_masks(setting, n, num_frames=40, seed=0):

@@ -180,7 +180,7 @@ def test_cli_classifier_free_label_control_and_edit(tmp_path, coma_test, capsys)
     z, cfg = sample(tmp_path / "cfg.npz", "label", "--label", "eyebrow", "--guidance", "cfg", "--scale", "2",
                     "--checkpoint", str(stem), "--n", "2", "--steps", "3", "--sampler", "ddim")
     assert z["landmarks"].shape == (2, 40, 68, 3) and cfg["guidance"] == "cfg" and cfg["scale"] == 2.0
-    assert cfg["guide"] == "" and cfg["checkpoint"] == str(stem)
+    assert cfg["guide"] is None and cfg["checkpoint"] == str(stem) and "lr" in cfg and cfg["lr"] is None
     out = tmp_path / "refused.npz"
     with pytest.raises(SystemExit):  # CFG with the unconditional denoiser
         main(["sample", "label", "--label", "eyebrow", "--guidance", "cfg", "--checkpoint", "denoiser_coma",
@@ -193,11 +193,16 @@ def test_cli_classifier_free_label_control_and_edit(tmp_path, coma_test, capsys)
     with np.load(edited) as f:
         assert f["landmarks"].shape == (2, 40, 68, 3) and list(f["labels"]) == ["mouth_open"] * 2
         assert json.loads(str(f["config"]))["sampler"] == "ddim"
+    np.savez(seq, landmarks=coma_test.landmarks[:1, :30])  # the recorded length is the input's
+    assert main(["edit", "--input", str(seq), "--label", "mouth_open", "--steps", "4", "--out", str(edited)]) == 0
+    with np.load(edited) as f:
+        assert f["landmarks"].shape == (1, 30, 68, 3) and json.loads(str(f["config"]))["num_frames"] == 30
     bad = coma_test.landmarks[:1].copy()
     bad[0, 0, 0, 0] = np.nan
     np.savez(seq, landmarks=bad)
-    for args, message in [([], "NaN or infinite"), (["--eta", "1.5"], "eta must be a number in"),
-                          (["--scale", "-1"], "scale must be a non-negative number")]:
+    for args, message in [([], "NaN or infinite"), (["--scale", "-1"], "scale must be a non-negative number"),
+                          (["--keep", "0:40"], "keep holds every frame"),
+                          (["--guidance", "cfg", "--dataset", "bu"], "train denoiser --conditional --dataset bu")]:
         if args:
             np.savez(seq, landmarks=coma_test.landmarks[:1])
         with pytest.raises(SystemExit):

@@ -121,7 +121,7 @@ class MeanShiftGuidance:
     def __call__(self, x_hat, xt, t, out):
         grad = gradient_at(xt, lambda x: self.score(x, steps_of(t, x)))
         if self.diffusion.eta is None:
-            return x_hat + self.scale * out["variance"] * grad
+            return x_hat + self.scale * out["guidance_variance"] * grad
         # DDIM (Dhariwal & Nichol 2021, Alg. 2): eps_hat = eps - s sqrt(1 - abar_t) grad, the step taken with eps_hat
         eps = out["eps"] - self.scale * float(self.diffusion.sqrt_one_minus_alphas_bar[t]) * grad
         return x_hat + self.diffusion.mean_variance_from_eps(xt, t, eps)["mean"] - out["mean"]

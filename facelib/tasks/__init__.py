@@ -18,12 +18,15 @@ from .decoder import decoder_then_diffusion
 from .edit import check_sequences, edit, invert, keep_on_path
 from .fill import fill
 from .geometry import geometry_adaptive, geometry_passes, order_sensitive_label, table4_inputs
-from .label import adagrad_lr, check_labels, label_control, label_sampler, step_scaled_lr, table1_generators
+from .label import (adagrad_lr, check_labels, label_control, label_sampler, load_conditional_denoiser, step_scaled_lr,
+                    table1_generators)
 from .loading import TrainedDenoiser, TrainedGuide, check_same_space, load_denoiser, load_guide, load_text_head
 from .text import text_control, text_guidance_weight, text_lr, text_score
 from .unconditional import unconditional
 
-__all__ = ["decoder_then_diffusion", "check_sequences", "edit", "invert", "keep_on_path", "check_labels", "label_sampler", "table1_generators", "fill", "geometry_adaptive", "geometry_passes", "order_sensitive_label", "table4_inputs",
-           "adagrad_lr", "label_control", "step_scaled_lr", "TrainedDenoiser", "TrainedGuide", "check_same_space",
-           "load_denoiser", "load_guide", "load_text_head", "text_control", "text_guidance_weight", "text_lr",
-           "text_score", "unconditional"]
+__all__ = ["decoder_then_diffusion", "check_sequences", "edit", "invert", "keep_on_path", "check_labels",
+           "label_sampler", "load_conditional_denoiser", "table1_generators", "fill", "geometry_adaptive",
+           "geometry_passes", "order_sensitive_label", "table4_inputs", "adagrad_lr", "label_control",
+           "step_scaled_lr", "TrainedDenoiser", "TrainedGuide", "check_same_space", "load_denoiser",
+           "load_guide", "load_text_head", "text_control", "text_guidance_weight", "text_lr", "text_score",
+           "unconditional"]

@@ -13,7 +13,7 @@ import torch
 
 from ..config import Edit
 from ..guidance import ClassifierFree
-from ..inpainting import check_known_mask, keep_known, parse_known
+from ..inpainting import keep_known, parse_ranges
 from .label import check_labels, label_sampler
 from .loading import task_settings
 
@@ -32,10 +32,21 @@ def check_sequences(sequences):
 def invert(denoiser, sequences, settings=Edit(), model=None, progress=False, trajectory=False):
     """x_T of each sequence (n, F, 68, 3) in mm under the chain of ``settings`` (DDIM inversion), normalised;
     ``model``: the eps network to invert with (default the denoiser's own); ``trajectory``: every x_t, t = 0..K."""
-    diffusion = denoiser.diffusion_with(settings.steps, settings.variance, 0.0)
+    chain = denoiser.diffusion_with(settings.steps, settings.variance, 0.0)
     x0 = torch.as_tensor(denoiser.normalizer.normalize(check_sequences(sequences)), dtype=torch.float32)
-    return diffusion.invert(model or denoiser.model, x0.to(denoiser.device), progress=progress, refine=settings.refine,
-                            trajectory=trajectory)
+    return chain.invert(model or denoiser.model, x0.to(denoiser.device), progress=progress, refine=settings.refine,
+                        trajectory=trajectory)
+
+
+def kept_frames(keep, shape):
+    """The frames to keep (n, F) bool from ranges "0:1" or a mask (F,) or (n, F) (errors name what is allowed)."""
+    mask = parse_ranges(keep, shape[1]) if isinstance(keep, str) else np.asarray(keep)
+    mask = np.broadcast_to(mask, shape) if mask.ndim == 1 and len(mask) == shape[1] else mask
+    if np.shape(mask) != tuple(shape) or not np.isin(mask, (0, 1)).all():
+        raise ValueError(f"keep must be frame ranges like '0:1' or a boolean mask of shape ({shape[1]},) or {shape}")
+    if np.asarray(mask, dtype=bool).all(axis=1).any():
+        raise ValueError("keep holds every frame of a sequence: there is nothing left to edit")
+    return np.asarray(mask, dtype=bool).copy()
 
 
 def keep_on_path(path, kept, inner=None):
@@ -57,14 +68,13 @@ def edit(sequences, label, keep=None, settings=Edit(), denoiser=None, guide=None
     :class:`facelib.config.LabelControl` on a DDIM chain of 100 steps).  Classifier-free guidance inverts with
     the conditional denoiser told "no label"."""
     x = check_sequences(sequences)
+    if overrides.get("num_frames", x.shape[1]) != x.shape[1]:
+        raise ValueError(f"num_frames {overrides['num_frames']} differs from the sequences' {x.shape[1]} frames")
     settings, _ = task_settings(settings, {**overrides, "num_frames": x.shape[1]}, len(x))
     labels = check_labels(label, len(x))
-    kept = None
-    if keep is not None:
-        kept = parse_known(keep, x.shape[1]) if isinstance(keep, str) else check_known_mask(keep, x.shape[1])
-        kept = np.broadcast_to(kept, x.shape[:2]).copy()
+    kept = None if keep is None else kept_frames(keep, x.shape[:2])
     denoiser, diffusion, model, hook = label_sampler(labels, settings, denoiser, guide)
-    free = ClassifierFree(model.denoiser, model.labels, 0.0) if isinstance(model, ClassifierFree) else model
+    free = model.denoiser if isinstance(model, ClassifierFree) else model  # no label: the free estimate
     path = invert(denoiser, x, settings, free, progress, trajectory=True)
     if kept is not None:
         hook = keep_on_path(path, torch.as_tensor(kept).to(denoiser.device), hook)

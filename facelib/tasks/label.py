@@ -58,13 +58,24 @@ def check_labels(label, n):
     return labels
 
 
+def load_conditional_denoiser(dataset):
+    """denoiser_<dataset>_cfg, the label-conditional denoiser of classifier-free guidance (an error naming the
+    command that trains it when it is missing)."""
+    name = f"denoiser_{dataset}_cfg"
+    try:
+        return load_denoiser(name)
+    except FileNotFoundError:
+        raise FileNotFoundError(f"classifier-free guidance needs the label-conditional denoiser {name}: train it with "
+                                f"`python -m facelib train denoiser --conditional --dataset {dataset}`") from None
+
+
 def label_sampler(labels, settings, denoiser=None, guide=None):
     """What label control samples with: (denoiser, chain, the model the chain runs, the sampler hook).
 
     Classifier guidance: the unconditional denoiser and a hook that climbs log p_phi(y | x_t) (Alg. 1 or the
     mean shift).  Classifier-free guidance: denoiser_<dataset>_cfg inside :class:`ClassifierFree`, no hook."""
     if settings.guidance == "cfg":
-        denoiser = denoiser or load_denoiser(f"denoiser_{settings.dataset}_cfg")
+        denoiser = denoiser or load_conditional_denoiser(settings.dataset)
         model = ClassifierFree(denoiser.model, denoiser.class_indices(labels), settings.guidance_scale)
         return denoiser, denoiser.diffusion_with(settings.steps, settings.variance, settings.ddim_eta), model, None
     guide = guide or load_guide(settings.dataset, settings.classifier_type)
