@@ -281,9 +281,9 @@ class GaussianDiffusion:
         before x_t is: the usual inversion takes it at x_{t-1} (an error of first order in the step), and
         ``refine`` fixed-point iterations then re-read it at the x_t found, so that the DDIM step from x_t lands
         on x_{t-1} again (Pan et al. 2023, AIDI; a fixed number of iterations, no convergence test: each one
-        shrinks the residual by a factor that is smaller the shorter the step).  ``run`` with eta = 0 on this chain brings x_T back to x_0;
-        regenerating it with guidance edits x_0 keeping what x_T encodes.  ``trajectory``: return every x_t,
-        t = 0..T, instead of x_T alone."""
+        shrinks the residual by a factor that is smaller the shorter the step).  ``run`` with eta = 0 on this
+        chain brings x_T back to x_0; regenerating it with guidance edits x_0 keeping what x_T encodes.
+        ``trajectory``: return every x_t, t = 0..T, instead of x_T alone."""
         if isinstance(refine, bool) or not isinstance(refine, (int, np.integer)) or refine < 0:
             raise ValueError(f"refine must be a number of fixed-point iterations >= 0, got {refine!r}")
         net, path = self.wrap(model), [x0]
@@ -294,7 +294,8 @@ class GaussianDiffusion:
                 xt = x
                 for _ in range(1 + refine):
                     eps = net(xt, t, mask)
-                    x0_hat = (x - (1.0 - abar_prev).sqrt() * eps) / abar_prev.sqrt()  # the estimate the step back from x_t reads
+                    # the x0_hat that the step back from x_t reads, then the x_t it implies
+                    x0_hat = (x - (1.0 - abar_prev).sqrt() * eps) / abar_prev.sqrt()
                     xt = abar.sqrt() * x0_hat + (1.0 - abar).sqrt() * eps
                 path.append(xt)
         return path if trajectory else path[-1]
