@@ -81,10 +81,8 @@ def main():
         rows.append(scored(name, str(changed or "defaults"), x, targets, steps, seconds))
         print(rows[-1], flush=True)
     if args.save:
-        if args.only is not None and results.result_path(args.save).exists():  # keep the others' stored rows
-            stored = {r[0]: r for r in results.load_result(args.save)["rows"]}
-            stored.update({r[0]: r for r in rows})
-            rows = [stored[n] for n in ["real test sequences"] + [c[0] for c in CANDIDATES] if n in stored]
+        if args.only is not None:  # keep the others' stored rows
+            rows = results.merged_rows(args.save, rows)
         results.save_result(args.save, "Table 1 baselines: tuning sweep (coma, a fraction of the budget)", COLUMNS,
                             rows, results.Run(checkpoints=["ic_coma_I"], seeds=[0], n=len(labels), steps=[],
                                               wall_time_s=time.perf_counter() - t_start),

@@ -1,14 +1,16 @@
 """Fewer steps and guidance without a classifier (issue 27): DDIM against respaced DDPM, classifier-free against
 classifier guidance, and editing by DDIM inversion, on coma.
 
-Usage: python benchmarks/fast_sampling.py [--experiment steps|guidance|edit] [--n N] [--save NAME]
-steps (default): unconditional sampling and label control (Alg. 1) with the ancestral DDPM step and with DDIM
-    (eta = 0) on chains of 10, 20, 50, 100, 200 and 2000 steps: seconds per sequence, IC accuracy, FID and
-    diversity with 95 % bootstrap intervals (n = 48 sequences, the labels in equal numbers).
-guidance: classifier guidance (Alg. 1, the unconditional denoiser and guide_coma_I) against classifier-free
-    guidance (denoiser_coma_cfg) at several weights w, each with DDPM and DDIM on 50 and 200 steps: accuracy, FID,
-    diversity, seconds per sequence and the peak memory of sampling (each row in a fresh process: its peak
-    resident memory above what loading the models took).
+Usage: python benchmarks/fast_sampling.py [--experiment steps|guidance|edit] [--tasks ...] [--n N] [--save NAME]
+steps (default): unconditional sampling and label control (Alg. 1, and the mean shift of scale
+    --mean-shift-scale) with the ancestral DDPM step and with DDIM (eta = 0) on chains of 10, 20, 50, 100, 200
+    and 2000 steps: seconds per sequence, IC accuracy, FID and diversity with 95 % bootstrap intervals (n = 48
+    sequences, the labels in equal numbers).  --tasks runs some of the three; with --save, their rows replace
+    those of the stored table and the other rows stay.
+guidance: classifier guidance (Alg. 1, and the mean shift at several scales s: the unconditional denoiser and
+    guide_coma_I) against classifier-free guidance (denoiser_coma_cfg) at several weights w, each with DDPM and DDIM on 50 and 200
+    steps: accuracy, FID, diversity, seconds per sequence and the peak memory of sampling (each row in a fresh
+    process: its peak resident memory above what loading the models took).
 edit: DDIM inversion of the first n = 32 test sequences at 100 steps (refine 0, 1, 2: the reconstruction error in
     mm), then editing each towards another label (the IC's reading of the new label, the neutral frame's
     drift in mm, the correlation of the motion's timing with the original's), by Alg. 1, the mean shift and
@@ -29,6 +31,7 @@ from facelib import config, data, evaluation, results, tasks
 
 STEPS = [10, 20, 50, 100, 200, 2000]
 CFG_SCALES = [1.0, 1.5, 2.5, 4.0]
+MEAN_SHIFT_SCALES = [1.0, 3.0, 10.0, 30.0]
 SCORE_COLUMNS = ["Acc (%)", "95 % interval", "FID", "95 % interval", "diversity", "95 % interval"]
 
 
@@ -44,22 +47,29 @@ def balanced_labels(ev, n):
     return labels, np.array([ev.class_index(y) for y in labels])
 
 
+def steps_tasks(mean_shift_scale):
+    """{--tasks name: (row name, label control's settings changed; None: unconditional sampling)}."""
+    return {"unconditional": ("unconditional", None), "alg1": ("label control (Alg. 1)", {"method": "adagrad"}),
+            "mean_shift": (f"label control (mean shift, s = {mean_shift_scale:g})",
+                           {"method": "mean_shift", "scale": mean_shift_scale})}
+
+
 def steps_experiment(args, ev):
     labels, targets = balanced_labels(ev, args.n)
     denoiser, guide = tasks.load_denoiser("denoiser_coma"), tasks.load_guide("coma")
     rows = []
-    for task in ("unconditional", "label control (Alg. 1)"):
+    for task, changed in (steps_tasks(args.mean_shift_scale)[name] for name in args.tasks):
         for sampler in ("ddpm", "ddim"):
             for steps in args.steps:
                 common = dict(steps=steps, seed=0, sampler=sampler, denoiser=denoiser, progress=False)
                 t0 = time.perf_counter()
-                if task == "unconditional":
+                if changed is None:
                     x = tasks.unconditional(args.n, **common)
                 else:
-                    x = tasks.label_control(labels, args.n, guide=guide, **common)
+                    x = tasks.label_control(labels, args.n, guide=guide, **common, **changed)
                 dt = time.perf_counter() - t0
-                scores = scored(ev, x, ev.features(x).argmax(1) if task == "unconditional" else targets)
-                if task == "unconditional":  # no target: no accuracy
+                scores = scored(ev, x, ev.features(x).argmax(1) if changed is None else targets)
+                if changed is None:  # no target: no accuracy
                     scores[:2] = ["", ""]
                 rows.append([task, sampler, steps, round(dt / args.n, 3), *scores])
                 print(f"{task:>24} {sampler:>5} {steps:>5} {rows[-1][3]:>8.3f} s/seq  Acc {rows[-1][4]}  "
@@ -77,8 +87,9 @@ def _sample_in_child(kind, labels, steps, sampler, scale, threads):
     """One guided run in a fresh process (CPU): (sequences, seconds, the peak resident memory of sampling above the
     memory the loaded models hold, MiB).  The peak is reset after loading (Linux: /proc/self/clear_refs)."""
     torch.set_num_threads(threads)
-    if kind == "classifier":
-        models = dict(denoiser=tasks.load_denoiser("denoiser_coma"), guide=tasks.load_guide("coma"))
+    if kind in ("adagrad", "mean_shift"):
+        models = dict(denoiser=tasks.load_denoiser("denoiser_coma"), guide=tasks.load_guide("coma"), method=kind,
+                      scale=scale)
     else:
         models = dict(denoiser=tasks.load_denoiser("denoiser_coma_cfg"), guidance="cfg", scale=scale)
     gc.collect()
@@ -93,7 +104,8 @@ def _sample_in_child(kind, labels, steps, sampler, scale, threads):
 
 def guidance_experiment(args, ev):
     labels, targets = balanced_labels(ev, args.n)
-    runs = [("classifier guidance (Alg. 1)", "classifier", None)]
+    runs = [("classifier guidance (Alg. 1)", "adagrad", None)]
+    runs += [(f"classifier guidance (mean shift, s = {s:g})", "mean_shift", s) for s in MEAN_SHIFT_SCALES]
     runs += [(f"classifier-free, w = {w:g}", "cfg", w) for w in CFG_SCALES]
     rows = []
     context = multiprocessing.get_context("spawn")
@@ -162,7 +174,7 @@ def edit_experiment(args, ev):
     rows.append(["two different test sequences of the same order", "", *[""] * 8, r_unrelated, ""])
     keep = np.zeros(x.shape[:2], dtype=bool)  # the neutral frame of each sequence
     keep[:, 0], keep[:, -1] = kinds == data.KIND_NAMES.index("N2E"), kinds == data.KIND_NAMES.index("E2N")
-    runs = [("classifier guidance (Alg. 1)", models),
+    runs = [("classifier guidance (Alg. 1)", dict(models, method="adagrad")),
             (f"mean shift (scale {args.mean_shift_scale:g})",
              dict(models, method="mean_shift", scale=args.mean_shift_scale)),
             (f"classifier-free (w = {config.CFG_SCALE:g})", cfg_models)]
@@ -194,7 +206,10 @@ def main():
     parser.add_argument("--n", type=int, default=None, help="sequences per row (steps, guidance: 48; edit: 32)")
     parser.add_argument("--steps", type=int, nargs="+", default=STEPS, help=f"steps: the chains' lengths (default "
                         f"{' '.join(map(str, STEPS))})")
-    parser.add_argument("--mean-shift-scale", type=float, default=10.0, help="edit: the mean-shift rows' scale")
+    parser.add_argument("--tasks", nargs="+", choices=list(steps_tasks(0)), default=list(steps_tasks(0)),
+                        help="steps: the tasks to run (default: all)")
+    parser.add_argument("--mean-shift-scale", type=float, default=config.MEAN_SHIFT_SCALE,
+                        help="steps, edit: the mean-shift rows' scale s (default: config.MEAN_SHIFT_SCALE)")
     parser.add_argument("--save", metavar="NAME", default=None, help="write the table to results/NAME.json")
     args = parser.parse_args()
     args.n = args.n or (32 if args.experiment == "edit" else 48)
@@ -215,12 +230,16 @@ def main():
                   "guidance": "Classifier guidance (Alg. 1) against classifier-free guidance (coma)",
                   "edit": "DDIM inversion and editing of test sequences (coma)"}
         steps = {"steps": args.steps, "guidance": [50, 200], "edit": [100]}[args.experiment]
+        if args.experiment == "steps" and set(args.tasks) != set(steps_tasks(0)):
+            rows = results.merged_rows(args.save, rows, key_length=3)  # the other tasks' rows stay
         path = results.save_result(
             args.save, title=titles[args.experiment], columns=columns, rows=rows,
             run=results.Run(checkpoints=checkpoints, seeds=[0], n=args.n, steps=steps,
                             wall_time_s=time.perf_counter() - t0),
             notes="intervals: 95 % bootstrap over the sequences (Evaluator.score); FID against the training split "
-                  f"from n sequences; DDIM at eta = 0; label control with the book's defaults (config.LabelControl)")
+                  f"from n sequences; DDIM at eta = 0; label control with the book's defaults (config.LabelControl); "
+                  "steps with --tasks: the other tasks' rows are those of earlier runs (the commit, date and wall "
+                  "time above are this run's)")
         print(f"saved {path}")
 
 

@@ -89,7 +89,8 @@ def add_parsers(sub):
         _option(t[task], task, "guidance", "classifier: a noisy classifier steers the unconditional denoiser (the "
                 "paper's); cfg: classifier-free guidance of the label-conditional denoiser denoiser_<dataset>_cfg",
                 choices=list(config.LABEL_GUIDANCE))
-        _option(t[task], task, "method", "classifier guidance by adagrad (Alg. 1) or mean_shift",
+        _option(t[task], task, "method", "classifier guidance by adagrad (Alg. 1) or mean_shift (None: adagrad with "
+                "the ddpm sampler, mean_shift with ddim)",
                 choices=list(config.GUIDANCE_METHODS))
         _option(t[task], task, "scale", f"the mean shift's gradient scale s (None: {config.MEAN_SHIFT_SCALE:g}) or "
                 f"CFG's weight w >= 0 (None: {config.CFG_SCALE:g})", type=float)
@@ -186,6 +187,7 @@ def run(args):
             "guide": None if cfg else GUIDES.get(args.task, "").format(settings.dataset),
             "adagrad_steps": config.ADAGRAD_STEPS, **asdict(settings),
             **({"scale": settings.guidance_scale} if hasattr(settings, "guidance_scale") else {}),
+            **({"method": settings.guidance_method} if hasattr(settings, "guidance_method") else {}),
             **{k: getattr(args, k) for k in ("label", "text", "input", "known", "neutral", "keep") if hasattr(args, k)}}
     np.savez(args.out, landmarks=landmarks.astype(np.float32), config=json.dumps(used),
              **{k: np.asarray(v) for k, v in extra.items()})

@@ -121,6 +121,19 @@ def save_result(name, title, columns, rows, run, notes=""):
     return path
 
 
+def merged_rows(name, rows, key_length=1):
+    """``rows`` merged into the stored results/NAME.json (when it exists): a stored row is replaced by the new
+    row with the same key (its first ``key_length`` entries), stored rows no new row replaces are kept in their
+    order, and new rows with a new key follow.  For benchmarks that re-run some of a table's rows."""
+    path = result_path(name)
+    if not path.exists():
+        return list(rows)
+    new = {tuple(r[:key_length]): r for r in _plain(rows)}
+    stored = json.loads(path.read_text())["rows"]
+    merged = [new.pop(tuple(r[:key_length]), r) for r in stored]
+    return merged + list(new.values())
+
+
 def problems(record, path="result"):
     """What is wrong with a stored result: missing or mistyped fields, another schema, rows that do
     not fit the columns, or checkpoints whose sha256 changed since it ran.  Empty when it is sound."""

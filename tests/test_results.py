@@ -39,6 +39,14 @@ def test_save_then_load_keeps_the_table_and_its_provenance(tmp_results):
     assert "re-run" in results.markdown_table(record) and "[75.00, 85.00]" in results.markdown_table(record)
 
 
+def test_merged_rows_replace_the_stored_rows_of_the_same_key_and_keep_the_others(tmp_results):
+    assert results.merged_rows("demo", [["new", 1.0, [0.0, 2.0]]]) == [["new", 1.0, [0.0, 2.0]]]  # nothing stored
+    results.save_result("demo", "t", ["m", "steps", "x"], [["a", 10, 1.0], ["a", 50, 2.0], ["b", 10, 3.0]],
+                        results.Run(checkpoints=[], seeds=[0], n=1, steps=[], wall_time_s=0.0))
+    merged = results.merged_rows("demo", [["a", 50, 9.0], ["c", 10, 4.0]], key_length=2)
+    assert merged == [["a", 10, 1.0], ["a", 50, 9.0], ["b", 10, 3.0], ["c", 10, 4.0]]
+
+
 def test_a_stale_result_names_the_file_and_the_checkpoint(tmp_results):
     path = _save()
     record = json.loads(path.read_text())

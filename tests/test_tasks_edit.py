@@ -40,6 +40,12 @@ def test_classifier_free_label_control_samples_the_conditional_denoiser(tiny_cfg
     assert np.abs(a - b).max() > 1e-4
     assert config.LabelControl(guidance="cfg").guidance_scale == config.CFG_SCALE
     assert config.LabelControl().guidance_scale == config.MEAN_SHIFT_SCALE
+    # classifier guidance: Alg. 1 under DDPM, the mean shift under DDIM, unless chosen; --paper is Alg. 1
+    assert config.LabelControl().guidance_method == "adagrad"
+    assert config.LabelControl(sampler="ddim").guidance_method == "mean_shift"
+    assert config.LabelControl(sampler="ddim", method="adagrad").guidance_method == "adagrad"
+    assert config.LabelControl(sampler="ddim").paper().guidance_method == "adagrad"
+    assert config.Edit().guidance_method == "mean_shift"
     with pytest.raises(ValueError, match="needs a label-conditional denoiser.*denoiser_coma is unconditional"):
         tasks.label_control("high_smile", 2, steps=2, guidance="cfg", denoiser=denoiser, progress=False)
     with pytest.raises(ValueError, match="unknown label 'smile'.*allowed: bareteeth"):

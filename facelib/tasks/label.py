@@ -81,7 +81,7 @@ def label_sampler(labels, settings, denoiser=None, guide=None):
     guide = guide or load_guide(settings.dataset, settings.classifier_type)
     score = ClassifierScore(guide.model, guide.class_indices(labels))
     denoiser, diffusion = guided_chain(guide, denoiser, settings)
-    if settings.method == "adagrad":
+    if settings.guidance_method == "adagrad":
         lr = settings.lr
         if lr is None:
             lr = adagrad_lr(guide.dataset, settings.steps, guide.meta["training"]["num_diffusion_steps"])
