@@ -295,3 +295,29 @@ def animate_landmarks(sequences, titles=None, fps=12, panel_size=2.6, dpi=70, li
 
     frames = figure_frames(draw, seqs.shape[1], figsize=(panel_size * len(seqs), panel_size * 1.2), dpi=dpi)
     return gif_html(frames, fps=fps)
+
+
+def steps_figure(record, figsize=(11, 3.3)):
+    """A stored table of quality against the chain's length (benchmarks/fast_sampling.py, steps) as one figure:
+    the FID of unconditional sampling, then the accuracy and the FID of label control, against the reverse steps
+    (log scale); one line per task and sampler, each with its 95 % interval (the column after the measure's) as a
+    band.  Returns the figure."""
+    col = {name: record["columns"].index(name) for name in ("task", "sampler", "steps", "Acc (%)", "FID")}
+    rows = record["rows"]
+    fig, axes = plt.subplots(1, 3, figsize=figsize)
+    panels = [(axes[0], "unconditional", "FID"), (axes[1], "label control", "Acc (%)"),
+              (axes[2], "label control", "FID")]
+    for ax, task, measure in panels:
+        m = col[measure]
+        for i, name in enumerate(dict.fromkeys(r[col["task"]] for r in rows if r[col["task"]].startswith(task))):
+            for sampler, style in (("ddpm", "o--"), ("ddim", "s-")):
+                mine = sorted((r for r in rows if r[col["task"]] == name and r[col["sampler"]] == sampler),
+                              key=lambda r: r[col["steps"]])
+                ks = [r[col["steps"]] for r in mine]
+                label = f"{sampler.upper()}{name[len(task):]}"
+                ax.plot(ks, [r[m] for r in mine], style, color=f"C{i}", label=label, alpha=0.9)
+                ax.fill_between(ks, *np.array([r[m + 1] for r in mine], dtype=float).T, color=f"C{i}", alpha=0.12)
+        ax.set(xscale="log", xlabel="reverse steps (of T = 2000)", ylabel=measure, title=task)
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    return fig

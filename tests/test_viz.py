@@ -1,4 +1,5 @@
 """Renders, GIFs and landmark plots."""
+import matplotlib.pyplot as plt
 import numpy as np
 import pytest
 
@@ -30,3 +31,19 @@ def test_gif_html_and_landmark_plot_validate():
     assert html.startswith('<img src="data:image/gif;base64,')
     with pytest.raises(ValueError, match=r"landmarks must have shape \(68, 3\)"):
         viz.plot_landmarks(np.zeros((10, 3)))
+
+
+def test_steps_figure_draws_one_line_per_task_and_sampler_with_its_interval():
+    columns = ["task", "sampler", "steps", "s per sequence", "Acc (%)", "95 % interval", "FID", "95 % interval",
+               "diversity", "95 % interval"]
+    rows = [[task, sampler, k, 0.1, acc, [acc - 5, acc + 5], fid, [fid - 1, fid + 1], 9.0, [8.0, 10.0]]
+            for task, acc in (("unconditional", 0.0), ("label control (Alg. 1)", 80.0), ("label control (x)", 70.0))
+            for sampler, fid in (("ddpm", 3.0), ("ddim", 5.0)) for k in (10, 50)]
+    for r in rows[:4]:  # unconditional: no accuracy
+        r[4:6] = ["", ""]
+    fig = viz.steps_figure({"columns": columns, "rows": rows})
+    unconditional, acc, fid = fig.axes
+    assert len(unconditional.lines) == 2 and len(acc.lines) == 4 and len(fid.lines) == 4
+    assert list(fid.lines[2].get_ydata()) == [3.0, 3.0] and acc.get_ylabel() == "Acc (%)"
+    assert [t.get_text() for t in fid.get_legend().get_texts()][:2] == ["DDPM (Alg. 1)", "DDIM (Alg. 1)"]
+    plt.close(fig)
