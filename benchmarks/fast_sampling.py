@@ -124,12 +124,13 @@ def guidance_experiment(args, ev):
 
 def neutral_frames(x, kinds):
     """The neutral frame of each sequence: the first for N2E, the last for E2N."""
-    return np.stack([s[0] if data.KIND_NAMES[k] == "N2E" else s[-1] for s, k in zip(x, kinds)])
+    return x[np.arange(len(x)), data.neutral_frame_indices(kinds, x.shape[1])]
 
 
 def next_to_neutral(x, kinds):
     """The frame next to the neutral one: the second for N2E, the last but one for E2N."""
-    return np.stack([s[1] if data.KIND_NAMES[k] == "N2E" else s[-2] for s, k in zip(x, kinds)])
+    i = data.neutral_frame_indices(kinds, x.shape[1])
+    return x[np.arange(len(x)), np.where(i == 0, 1, i - 1)]
 
 
 def rms_mm(a, b):
@@ -173,7 +174,7 @@ def edit_experiment(args, ev):
     r_unrelated = float(np.median(timing_correlation(x, test.landmarks[partner], kinds)))
     rows.append(["two different test sequences of the same order", "", *[""] * 8, r_unrelated, ""])
     keep = np.zeros(x.shape[:2], dtype=bool)  # the neutral frame of each sequence
-    keep[:, 0], keep[:, -1] = kinds == data.KIND_NAMES.index("N2E"), kinds == data.KIND_NAMES.index("E2N")
+    keep[np.arange(len(x)), data.neutral_frame_indices(kinds, x.shape[1])] = True
     runs = [("classifier guidance (Alg. 1)", dict(models, method="adagrad")),
             (f"mean shift (scale {args.mean_shift_scale:g})",
              dict(models, method="mean_shift", scale=args.mean_shift_scale)),

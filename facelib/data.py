@@ -65,6 +65,15 @@ def check_classifier_type(classifier_type):
                          f"got {classifier_type!r}")
 
 
+def neutral_frame_indices(kinds, num_frames):
+    """The frame of each sequence that shows the neutral face: 0 for N2E, the last (num_frames - 1) for E2N
+    (``kinds`` index KIND_NAMES, as FaceDataset.kinds do)."""
+    kinds = np.asarray(kinds)
+    if not np.isin(kinds, range(len(KIND_NAMES))).all():
+        raise ValueError(f"kinds must index {KIND_NAMES} (0 or 1), got {sorted(set(kinds.tolist()))}")
+    return np.where(kinds == KIND_NAMES.index("N2E"), 0, num_frames - 1)
+
+
 def check_split(split):
     if split not in config.SPLITS:
         raise ValueError(f"unknown split {split!r}; allowed: {', '.join(config.SPLITS)}")

@@ -176,3 +176,10 @@ def test_normalizer_is_invertible(coma_train):
     np.testing.assert_allclose(norm.denormalize(zt).numpy(), coma_train.landmarks[:10], atol=1e-4)
     again = data.LandmarkNormalizer.from_dict(json.loads(json.dumps(norm.to_dict())))
     np.testing.assert_allclose(again.normalize(coma_train.landmarks[:2]), norm.normalize(coma_train.landmarks[:2]))
+
+
+def test_the_neutral_frame_is_the_first_of_n2e_and_the_last_of_e2n():
+    kinds = [data.KIND_NAMES.index("N2E"), data.KIND_NAMES.index("E2N")]
+    assert data.neutral_frame_indices(kinds, 40).tolist() == [0, 39]
+    with pytest.raises(ValueError, match=r"kinds must index \('N2E', 'E2N'\)"):
+        data.neutral_frame_indices([0, 2], 40)
