@@ -7,7 +7,8 @@ trained on the coma training split for ``--budget`` times its recipe's steps, th
 ``--per-label`` sequences of every label.  The type-I IC scores them: accuracy and FID with 95 %
 bootstrap intervals, diversity, and "motion", the mean over sequences of the largest landmark
 displacement from the first frame (mm).  The real test sequences are the first row.  ``--only`` runs
-some candidates (by index) and, with ``--save``, replaces just their rows in the stored table.
+some candidates (by index); with ``--save`` the stored table is rewritten after every candidate, replacing just
+the rows this run measured.
 
 The rule that picks a setting is the book's (chapter 06): the best accuracy - 2 FID.  The picks go into
 config.ActorTraining and config.Motion3DGANTraining and are then trained at the full budget:
@@ -66,6 +67,17 @@ def main():
         return [name, settings, s["accuracy"], list(s["accuracy_ci"]), s["fid"], list(s["fid_ci"]),
                 s["diversity"], motion(x), steps, seconds]
 
+    def save(rows):
+        """Store the table now (after every candidate: an interrupted sweep keeps what it measured), merged
+        with the stored rows of the candidates this run does not measure."""
+        results.save_result(args.save, "Table 1 baselines: tuning sweep (coma, a fraction of the budget)", COLUMNS,
+                            results.merged_rows(args.save, rows),
+                            results.Run(checkpoints=["ic_coma_I"], seeds=[0], n=len(labels), steps=[],
+                                        wall_time_s=time.perf_counter() - t_start),
+                            notes=f"budget {args.budget} of each recipe's steps; {args.per_label} sequences per label; "
+                                  "rows of candidates this run did not measure are those of earlier runs (the commit, "
+                                  "date and wall time above are the last run's)")
+
     rows = [scored("real test sequences", "", test.landmarks, test.targets("I"), 0, 0.0)]
     print(rows[0], flush=True)
     for i in chosen:
@@ -80,16 +92,8 @@ def main():
         x = baselines.generate(model, labels, seed=0)
         rows.append(scored(name, str(changed or "defaults"), x, targets, steps, seconds))
         print(rows[-1], flush=True)
-    if args.save:
-        if args.only is not None:  # keep the others' stored rows
-            rows = results.merged_rows(args.save, rows)
-        results.save_result(args.save, "Table 1 baselines: tuning sweep (coma, a fraction of the budget)", COLUMNS,
-                            rows, results.Run(checkpoints=["ic_coma_I"], seeds=[0], n=len(labels), steps=[],
-                                              wall_time_s=time.perf_counter() - t_start),
-                            notes=f"budget {args.budget} of each recipe's steps; {args.per_label} sequences per label; "
-                                  "with --only, the other candidates' rows are those of earlier runs (the commit, "
-                                  "date and wall time above are this run's)")
-
+        if args.save:
+            save(rows)
 
 if __name__ == "__main__":
     main()
