@@ -32,6 +32,7 @@ from facelib import config, data, evaluation, results, tasks
 STEPS = [10, 20, 50, 100, 200, 2000]
 CFG_SCALES = [1.0, 1.5, 2.5, 4.0]
 MEAN_SHIFT_SCALES = [1.0, 3.0, 10.0, 30.0]
+EDIT_RUNS = ("inversion", "alg1", "mean_shift", "cfg")
 SCORE_COLUMNS = ["Acc (%)", "95 % interval", "FID", "95 % interval", "diversity", "95 % interval"]
 
 
@@ -160,7 +161,7 @@ def edit_experiment(args, ev):
     cfg_models = dict(denoiser=tasks.load_denoiser("denoiser_coma_cfg"), guidance="cfg")
     blank = [""] * 7  # the edit columns
     rows = []
-    for refine in (0, 1, 2):
+    for refine in ((0, 1, 2) if "inversion" in args.edit_runs else ()):
         den = models["denoiser"]
         chain = den.diffusion_with(100, eta=0.0)
         back = den.to_mm(chain.run(den.model, tasks.invert(den, x, config.Edit(refine=refine)), progress=False))
@@ -172,13 +173,14 @@ def edit_experiment(args, ev):
     # what unrelated sequences share: the timing r of each test sequence with another of the same kind
     partner = np.array([next(j for j in np.roll(pick, -1 - i) if kinds[j] == kinds[i]) for i in pick])
     r_unrelated = float(np.median(timing_correlation(x, test.landmarks[partner], kinds)))
-    rows.append(["two different test sequences of the same order", "", *[""] * 8, r_unrelated, ""])
+    if "inversion" in args.edit_runs:
+        rows.append(["two different test sequences of the same order", "", *[""] * 8, r_unrelated, ""])
     keep = np.zeros(x.shape[:2], dtype=bool)  # the neutral frame of each sequence
     keep[np.arange(len(x)), data.neutral_frame_indices(kinds, x.shape[1])] = True
-    runs = [("classifier guidance (Alg. 1)", dict(models, method="adagrad")),
-            (f"mean shift (scale {args.mean_shift_scale:g})",
-             dict(models, method="mean_shift", scale=args.mean_shift_scale)),
-            (f"classifier-free (w = {config.CFG_SCALE:g})", cfg_models)]
+    runs = [("classifier guidance (Alg. 1)", dict(models, method="adagrad"))] * ("alg1" in args.edit_runs)
+    runs += [(f"mean shift (scale {s:g})", dict(models, method="mean_shift", scale=s))
+             for s in (args.edit_scales or [args.mean_shift_scale]) if "mean_shift" in args.edit_runs]
+    runs += [(f"classifier-free (w = {config.CFG_SCALE:g})", cfg_models)] * ("cfg" in args.edit_runs)
     for name, kwargs in runs:
         for kept in (False, True):
             t0 = time.perf_counter()
@@ -211,6 +213,11 @@ def main():
                         help="steps: the tasks to run (default: all)")
     parser.add_argument("--mean-shift-scale", type=float, default=config.MEAN_SHIFT_SCALE,
                         help="steps, edit: the mean-shift rows' scale s (default: config.MEAN_SHIFT_SCALE)")
+    parser.add_argument("--edit-runs", nargs="+", choices=EDIT_RUNS, default=list(EDIT_RUNS),
+                        help="edit: the parts to run (default: all); with --save, their rows replace those of the "
+                             "stored table and the other rows stay")
+    parser.add_argument("--edit-scales", type=float, nargs="+", default=None,
+                        help="edit: the mean shift's scales (default: --mean-shift-scale)")
     parser.add_argument("--save", metavar="NAME", default=None, help="write the table to results/NAME.json")
     args = parser.parse_args()
     args.n = args.n or (32 if args.experiment == "edit" else 48)
@@ -233,14 +240,16 @@ def main():
         steps = {"steps": args.steps, "guidance": [50, 200], "edit": [100]}[args.experiment]
         if args.experiment == "steps" and set(args.tasks) != set(steps_tasks(0)):
             rows = results.merged_rows(args.save, rows, key_length=3)  # the other tasks' rows stay
+        if args.experiment == "edit" and set(args.edit_runs) != set(EDIT_RUNS):
+            rows = results.merged_rows(args.save, rows, key_length=2)
         path = results.save_result(
             args.save, title=titles[args.experiment], columns=columns, rows=rows,
             run=results.Run(checkpoints=checkpoints, seeds=[0], n=args.n, steps=steps,
                             wall_time_s=time.perf_counter() - t0),
             notes="intervals: 95 % bootstrap over the sequences (Evaluator.score); FID against the training split "
                   f"from n sequences; DDIM at eta = 0; label control with the book's defaults (config.LabelControl); "
-                  "steps with --tasks: the other tasks' rows are those of earlier runs (the commit, date and wall "
-                  "time above are this run's)")
+                  "steps with --tasks, edit with --edit-runs: the other rows are those of earlier runs (the commit, "
+                  "date and wall time above are the last run's)")
         print(f"saved {path}")
 
 

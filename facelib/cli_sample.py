@@ -92,7 +92,8 @@ def add_parsers(sub):
         _option(t[task], task, "method", "classifier guidance by adagrad (Alg. 1) or mean_shift (None: adagrad with "
                 "the ddpm sampler, mean_shift with ddim)",
                 choices=list(config.GUIDANCE_METHODS))
-        _option(t[task], task, "scale", f"the mean shift's gradient scale s (None: {config.MEAN_SHIFT_SCALE:g}) or "
+        ms = config.EDIT_MEAN_SHIFT_SCALE if task == "edit" else config.MEAN_SHIFT_SCALE
+        _option(t[task], task, "scale", f"the mean shift's gradient scale s (None: {ms:g}) or "
                 f"CFG's weight w >= 0 (None: {config.CFG_SCALE:g})", type=float)
     for task in ("text", "decoder"):
         t[task].add_argument("--text", required=True, help='what to show, e.g. "disgust high smile" or "from the '
