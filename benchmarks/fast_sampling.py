@@ -8,14 +8,14 @@ steps (default): unconditional sampling and label control (Alg. 1, and the mean 
     sequences, the labels in equal numbers).  --tasks runs some of the three; with --save, their rows replace
     those of the stored table and the other rows stay.
 guidance: classifier guidance (Alg. 1, and the mean shift at several scales s: the unconditional denoiser and
-    guide_coma_I) against classifier-free guidance (denoiser_coma_cfg) at several weights w, each with DDPM and DDIM on 50 and 200
-    steps: accuracy, FID, diversity, seconds per sequence and the peak memory of sampling (each row in a fresh
-    process: its peak resident memory above what loading the models took).
+    guide_coma_I) against classifier-free guidance (denoiser_coma_cfg) at several weights w, each with DDPM and
+    DDIM on 50 and 200 steps: accuracy, FID, diversity, seconds per sequence and the peak memory of sampling (each
+    row in a fresh process: its peak resident memory above what loading the models took).
 edit: DDIM inversion of the first n = 32 test sequences at 100 steps (refine 0, 1, 2: the reconstruction error in
     mm), then editing each towards another label (the IC's reading of the new label, the neutral frame's
     drift in mm, the correlation of the motion's timing with the original's), by Alg. 1, the mean shift and
     classifier-free guidance, each regenerating every frame or keeping the neutral one (then the drift is that
-    of the frame next to it).
+    of the frame next to it).  --edit-runs runs some parts, --edit-scales several mean-shift scales.
 --save NAME writes the table to results/NAME.json (facelib.results: provenance, checkpoint hashes).
 """
 import argparse

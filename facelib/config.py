@@ -321,11 +321,11 @@ GUIDANCE_METHODS = ("adagrad", "mean_shift")  # Alg. 1; classic classifier guida
 # guidance (Ho & Salimans 2022), a label-conditional denoiser with no classifier (DenoiserTraining.conditional)
 LABEL_GUIDANCE = ("classifier", "cfg")
 # The mean shift's gradient scale s: at 1 (Dhariwal & Nichol's) it steers too weakly here; 10 is the book's pick
-# (results/fast_sampling_guidance.json: s = 1, 3, 10, 30 with both samplers at 50 and 200 steps)
+# (results/world2/fast_sampling_guidance.json: s = 1, 3, 10, 30 with both samplers at 50 and 200 steps)
 MEAN_SHIFT_SCALE = 10.0
 CFG_SCALE = 2.5  # classifier-free guidance's weight w: MDM's (Tevet et al. 2023)
 # The mean shift's scale for editing (config.Edit; our choice): 20, where 3 edits in 4 read the new label with the
-# neutral frame kept (results/fast_sampling_edit.json: 56 % at 10, 75 % at 20, 88 % at 30; the first regenerated
+# neutral frame kept (results/world2/fast_sampling_edit.json: 56 % at 10, 75 % at 20, 88 % at 30; the first regenerated
 # frame then steps 0.6, 1.3 and 1.7 mm further from the neutral one than the original's does)
 EDIT_MEAN_SHIFT_SCALE = 20.0
 # Alg. 1's Adagrad learning rate, per dataset, for a chain of LR_REFERENCE_STEPS reverse steps: not in the
@@ -464,7 +464,7 @@ class LabelControl(Sampling):
     def guidance_method(self):
         """The classifier guidance this run uses: ``method``, or Alg. 1 under DDPM and the mean shift under DDIM,
         whose deterministic chain keeps the jitter of Alg. 1's Adagrad steps to the end
-        (results/fast_sampling_steps.json)."""
+        (results/world2/fast_sampling_steps.json)."""
         if self.method is not None:
             return self.method
         return "adagrad" if self.sampler == "ddpm" else "mean_shift"
