@@ -95,5 +95,6 @@ def main():
         if args.save:
             save(rows)
 
+
 if __name__ == "__main__":
     main()

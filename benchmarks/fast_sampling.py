@@ -170,17 +170,17 @@ def edit_experiment(args, ev):
                      *blank])
         print(f"inversion refine {refine}: RMSE median {rows[-1][2]:.4f} mm, p90 {rows[-1][3]:.4f}, "
               f"max {rows[-1][4]:.4f}", flush=True)
-    # what unrelated sequences share: the timing r of each test sequence with another of the same kind
-    partner = np.array([next(j for j in np.roll(pick, -1 - i) if kinds[j] == kinds[i]) for i in pick])
-    r_unrelated = float(np.median(timing_correlation(x, test.landmarks[partner], kinds)))
-    if "inversion" in args.edit_runs:
+    if "inversion" in args.edit_runs:  # what unrelated sequences share: the timing r with another of the same kind
+        partner = np.array([next(j for j in np.roll(pick, -1 - i) if kinds[j] == kinds[i]) for i in pick])
+        r_unrelated = float(np.median(timing_correlation(x, test.landmarks[partner], kinds)))
         rows.append(["two different test sequences of the same order", "", *[""] * 8, r_unrelated, ""])
     keep = np.zeros(x.shape[:2], dtype=bool)  # the neutral frame of each sequence
     keep[np.arange(len(x)), data.neutral_frame_indices(kinds, x.shape[1])] = True
-    runs = [("classifier guidance (Alg. 1)", dict(models, method="adagrad"))] * ("alg1" in args.edit_runs)
-    runs += [(f"mean shift (scale {s:g})", dict(models, method="mean_shift", scale=s))
-             for s in (args.edit_scales or [args.mean_shift_scale]) if "mean_shift" in args.edit_runs]
-    runs += [(f"classifier-free (w = {config.CFG_SCALE:g})", cfg_models)] * ("cfg" in args.edit_runs)
+    runs = {"alg1": [("classifier guidance (Alg. 1)", dict(models, method="adagrad"))],
+            "mean_shift": [(f"mean shift (scale {s:g})", dict(models, method="mean_shift", scale=s))
+                           for s in args.edit_scales or [args.mean_shift_scale]],
+            "cfg": [(f"classifier-free (w = {config.CFG_SCALE:g})", cfg_models)]}
+    runs = [run for part in EDIT_RUNS[1:] if part in args.edit_runs for run in runs[part]]
     for name, kwargs in runs:
         for kept in (False, True):
             t0 = time.perf_counter()

@@ -442,7 +442,8 @@ class LabelControl(Sampling):
     method: str | None = None
     guidance_weight: float = GUIDANCE_WEIGHT
     lr: float | None = None  # None: ADAGRAD_LR of the dataset, scaled to the steps (tasks.adagrad_lr)
-    scale: float | None = None  # the mean shift's s or CFG's w; None: MEAN_SHIFT_SCALE or CFG_SCALE
+    scale: float | None = None  # the mean shift's s or CFG's w; None: default_mean_shift_scale or CFG_SCALE
+    default_mean_shift_scale = MEAN_SHIFT_SCALE  # a class constant, not a field (Edit has its own)
 
     def __post_init__(self):
         super().__post_init__()
@@ -458,7 +459,7 @@ class LabelControl(Sampling):
         """The scale this run uses: ``scale``, or the default of its guidance (CFG's w, the mean shift's s)."""
         if self.scale is not None:
             return self.scale
-        return CFG_SCALE if self.guidance == "cfg" else MEAN_SHIFT_SCALE
+        return CFG_SCALE if self.guidance == "cfg" else self.default_mean_shift_scale
 
     @property
     def guidance_method(self):
@@ -482,6 +483,7 @@ class Edit(LabelControl):
     sampler: str = "ddim"  # inversion is DDIM's
     eta: float = 0.0
     refine: int = 2  # fixed-point iterations per inversion step (GaussianDiffusion.invert): 3 network calls per step
+    default_mean_shift_scale = EDIT_MEAN_SHIFT_SCALE
 
     def __post_init__(self):
         super().__post_init__()
@@ -490,13 +492,6 @@ class Edit(LabelControl):
         if self.sampler != "ddim" or self.eta != 0:
             raise ValueError(f"editing inverts a sequence by deterministic DDIM and regenerates it on the same path: "
                              f"the sampler must be 'ddim' with eta 0, got {self.sampler!r} with eta {self.eta!r}")
-
-    @property
-    def guidance_scale(self):
-        """``scale``, or CFG's w, or the mean shift's scale for editing (EDIT_MEAN_SHIFT_SCALE)."""
-        if self.scale is not None or self.guidance == "cfg":
-            return super().guidance_scale
-        return EDIT_MEAN_SHIFT_SCALE
 
     def paper(self):
         raise ValueError("editing is not in the paper: there is no --paper version of it")
