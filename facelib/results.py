@@ -184,6 +184,30 @@ def row_dicts(record):
     return [dict(zip(record["columns"], row)) for row in record["rows"]]
 
 
+def stored_row(record, key):
+    """The row of a stored result whose first cells are ``key`` (a tuple), e.g. ("label control (Alg. 1)",
+    "ddpm", 200); an error that lists the rows' first cells when no row starts so."""
+    key = tuple(key)
+    for row in record["rows"]:
+        if tuple(row[: len(key)]) == key:
+            return row
+    starts = [tuple(row[: len(key)]) for row in record["rows"]]
+    raise KeyError(f"results/{record['name']}: no row starts with {key}; the rows start with {starts}")
+
+
+def stored_value(record, key, column, interval=False):
+    """The cell of ``column`` in the row ``key`` (:func:`stored_row`); ``interval``: the 95 % interval stored
+    in the column after it instead."""
+    if column not in record["columns"]:
+        raise KeyError(f"results/{record['name']} has no column {column!r}; columns: {record['columns']}")
+    return stored_row(record, key)[record["columns"].index(column) + bool(interval)]
+
+
+def stored_cell(record, key, column, digits=0):
+    """'value [low, high]': the cell of ``column`` in the row ``key`` with its stored 95 % interval."""
+    return tables.interval_cell(stored_value(record, key, column), stored_value(record, key, column, True), digits)
+
+
 def catalogue():
     """One line per stored result: its name, wall time, cores and torch threads, date, problems
     (empty when sound and fresh) and the command that rewrites it."""
@@ -232,7 +256,9 @@ def markdown_table(record, fmt="{:.2f}"):
             del columns[i]
             for row in rows:
                 row[i - 1] = f"{row[i - 1]} {row.pop(i)}".strip()
-    head = (f"*Stored result* `results/{record['name']}.json`: {record['title']} (n = {record['n']}, "
+    path = result_path(record["name"])  # results/NAME.json, or results/world2/NAME.json in world 2
+    path = path.relative_to(config.PROJECT_ROOT) if path.is_relative_to(config.PROJECT_ROOT) else path
+    head = (f"*Stored result* `{path}`: {record['title']} (n = {record['n']}, "
             f"{record['wall_time_s'] / 60:.0f} min on {record['cores']} cores with {record['torch_threads']} "
             f"torch thread(s), {record['date']}; re-run: `{record['command']}`)\n\n")
     return head + tables.markdown(columns, rows)

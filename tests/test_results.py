@@ -147,6 +147,19 @@ def test_intervals_overlap_and_rows_as_dicts(tmp_results):
         {"method": "ours", "Acc (%)": 80.0, "95 % interval": [75.0, 85.0]}]
 
 
+def test_a_stored_number_is_found_by_its_row_key_and_column_with_its_interval(tmp_results):
+    _save(columns=["method", "steps", "Acc (%)", "95 % interval"],
+          rows=[["ours", 50, 80.0, [75.0, 85.0]], ["ours", 200, 82.0, [77.0, 86.0]]])
+    record = results.load_result("demo")
+    assert results.stored_value(record, ("ours", 200), "Acc (%)") == 82.0
+    assert results.stored_value(record, ("ours", 50), "Acc (%)", interval=True) == [75.0, 85.0]
+    assert results.stored_cell(record, ("ours", 50), "Acc (%)") == "80 [75, 85]"
+    with pytest.raises(KeyError, match=r"no row starts with \('ours', 100\).*\('ours', 50\)"):
+        results.stored_row(record, ("ours", 100))
+    with pytest.raises(KeyError, match="no column 'FID'"):
+        results.stored_value(record, ("ours", 50), "FID")
+
+
 def test_stored_numbers_keep_six_significant_digits_so_small_settings_survive():
     from facelib.results import _plain
     assert _plain({"kl_weight": 1e-05, "acc": np.float64(85.20710059), "rows": [0.000123456789]}) == \
