@@ -92,6 +92,21 @@ def test_the_calibration_table_has_a_row_per_published_measure_with_each_worlds_
         assert r[4][0] <= r[3] <= r[4][1]
 
 
+def test_the_calibration_table_shows_each_world_with_its_ratio_and_names_the_sources():
+    columns, rows, ratios = measures.calibration_table(worlds=(1, 2), num_identities=4)
+    assert columns == ["measure", "published", "source", "world 1", "world 2"]
+    assert [r[2] for r in rows][:2] == ["Jorge et al. 2012", "Tarantili et al. 2005"]
+    assert all(f"(x{ratios[2][k]:.2f})" in rows[k][4] for k in range(len(rows)))
+    with pytest.raises(ValueError, match="a citation key is a name, a year and a word"):
+        measures.source_label("Jorge 2012")
+
+
+def test_world_2_matches_every_published_measure_within_a_factor_1_5():
+    """Issue 25: the world-2 rig at its apex poses within a factor 1.5 of each published measurement."""
+    _, _, ratios = measures.calibration_table(worlds=(2,), num_identities=20)
+    assert np.all((ratios[2] > 1 / 1.5) & (ratios[2] < 1.5)), ratios[2]
+
+
 def test_lips_press_instead_of_passing_through_each_other():
     d = np.array([-1.0, 0.0, 0.25, 2.0])
     overlap = tissue.lip_overlap(d, np.zeros(4), softness=0.5)

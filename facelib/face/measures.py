@@ -1,6 +1,8 @@
 """Measurements that check the synthetic world has the properties the paper's methods need."""
 from __future__ import annotations
 
+import re
+
 import numpy as np
 
 from .aus import AU_NAMES, Face, au_vector
@@ -113,3 +115,26 @@ def calibration_rows(worlds=(2,), num_identities=40):
         rows.append(row)
     return rows
 
+
+
+def source_label(key):
+    """'Jorge et al. 2012' for the references.bib key 'jorge2012facial' (every source of ``PUBLISHED`` has
+    several authors)."""
+    match = re.fullmatch(r"([a-z]+)(\d{4})[a-z]*", key)
+    if match is None:
+        raise ValueError(f"a citation key is a name, a year and a word, like 'jorge2012facial', got {key!r}")
+    return f"{match.group(1).title()} et al. {match.group(2)}"
+
+
+def calibration_table(worlds=(2,), num_identities=40):
+    """:func:`calibration_rows` as table cells, (columns, rows, {world: the ratios median / published}):
+    measure | published | source | per world "median [10th, 90th percentile] (x ratio)"."""
+    columns = ["measure", "published", "source"] + [f"world {w}" for w in worlds]
+    rows, ratios = [], {w: [] for w in worlds}
+    for what, value, source, *ours in calibration_rows(worlds, num_identities):
+        row = [what, f"{value:g}", source_label(source)]
+        for w, (median, (low, high), ratio) in zip(worlds, zip(ours[::3], ours[1::3], ours[2::3])):
+            row.append(f"{median:.1f} [{low:.1f}, {high:.1f}] (x{ratio:.2f})")
+            ratios[w].append(ratio)
+        rows.append(row)
+    return columns, rows, {w: np.array(r) for w, r in ratios.items()}
