@@ -81,11 +81,18 @@ class Pairs:
     def __len__(self):
         return len(self.neutral)
 
+    def noise_free(self):
+        """The same pairs with the world's exact Delta L_f instead of the captured one: the landmarks are
+        vertices of the mesh, so it is Delta M_f at the template's landmark vertices."""
+        exact = self.delta_mesh[:, :, tpl.get_template().landmark_index]
+        return Pairs(self.neutral, exact, self.delta_mesh, self.frames, self.labels, self.subjects)
+
 
 def make_pairs(dataset, frames_per_sequence=10, seed=None, noise_free=False):
     """Pairs of every sequence of ``dataset``: ``frames_per_sequence`` frames, evenly spaced when
     ``seed`` is None (evaluation), else drawn at random without replacement (training).
-    ``noise_free``: Delta L_f from the world's exact landmarks instead of the captured (noisy) ones."""
+    ``noise_free``: Delta L_f from the world's exact landmarks instead of the captured (noisy) ones
+    (:meth:`Pairs.noise_free` gives the same from pairs already made)."""
     rng = None if seed is None else np.random.default_rng(seed)
     delta_l = dataset.delta_landmarks() if not noise_free else None
     neutral, dl, dm, frames = [], [], [], []
@@ -97,12 +104,9 @@ def make_pairs(dataset, frames_per_sequence=10, seed=None, noise_free=False):
         face = dataset.face(int(dataset.subjects[i]))
         m = face.neutral.astype(np.float32)
         neutral.append(m)
-        if noise_free:
-            w = dataset.au_weights[i, f].astype(np.float64)
-            dl.append((face.landmarks(w) - face.landmarks(np.zeros_like(w[0]))).astype(np.float32))
-        else:
-            dl.append(delta_l[i, f])
         dm.append(face.expression(dataset.au_weights[i, f].astype(np.float64)).astype(np.float32) - m)
+        # the landmarks are vertices of the mesh: the exact Delta L_f is Delta M_f at the landmark vertices
+        dl.append(dm[-1][:, tpl.get_template().landmark_index] if noise_free else delta_l[i, f])
         frames.append(f)
     return Pairs(np.stack(neutral), np.stack(dl), np.stack(dm), np.stack(frames), dataset.labels.copy(),
                  dataset.subjects.copy())
@@ -188,25 +192,39 @@ def deform(neutral_vertices, landmark_sequence, model=None):
     return tpl.place_mouth_band(neutral[None] + dm, tpl.get_template())
 
 
-def _motion_features(pairs):
-    """[Delta L_f, 1] of every pair frame, (n K, 205) float32."""
+def motion_features(pairs):
+    """[Delta L_f, 1] of every pair frame, (n K, 205) float32: the inputs of the closed-form regression."""
     x = pairs.delta_landmarks.reshape(-1, 204)
     return np.hstack([x, np.ones((len(x), 1), np.float32)])
 
 
-def fit_linear_regression(pairs, penalty=1e-2):
+def identity_features(pairs, identity_coeffs, reference):
+    """[Delta L_f, 1] and its interactions with the face's identity coefficients, (n K, 205 (1 + c)) float32:
+    a regression on them can change its map from Delta L_f to Delta M_f with the face.  ``identity_coeffs``
+    (n, c): each pair's face; ``reference`` (m, c): the training faces, whose mean and std standardise them."""
+    reference = np.asarray(reference, dtype=np.float64)
+    c = (np.asarray(identity_coeffs) - reference.mean(0)) / reference.std(0)
+    x = motion_features(pairs).reshape(len(pairs), -1, 205)
+    interactions = (x[..., :, None] * c[:, None, None, :].astype(np.float32)).reshape(*x.shape[:2], -1)
+    return np.concatenate([x, interactions], -1).reshape(-1, 205 * (1 + c.shape[1]))
+
+
+def fit_linear_regression(pairs, penalty=1e-2, features=None):
     """The closed-form reference row of Table 5: the ridge regression Delta M_f ~ A Delta L_f + b over
     every training pair frame, one map for every face (``penalty`` on every coefficient, b included:
-    it is tiny against the normal equations' scale).  X^T X is formed in float64, X^T Y in float32 to
-    keep the (n K, V 3) targets in memory.  Returns the coefficients (205, V 3)."""
-    x = _motion_features(pairs).astype(np.float64)
+    it is tiny against the normal equations' scale).  ``features``: other inputs than
+    :func:`motion_features` (e.g. :func:`identity_features`).  X^T X is formed in float64, X^T Y in
+    float32 to keep the (n K, V 3) targets in memory.  Returns the coefficients (d, V 3)."""
+    x = (motion_features(pairs) if features is None else features).astype(np.float64)
     y = pairs.delta_mesh.reshape(len(x), -1)
     return np.linalg.solve(x.T @ x + penalty * np.eye(x.shape[1]), (x.T.astype(np.float32) @ y).astype(np.float64))
 
 
-def linear_regression_errors(coefficients, pairs):
-    """Per-vertex Euclidean errors (n, K, V) in mm of :func:`fit_linear_regression`'s map on ``pairs``."""
-    predicted = (_motion_features(pairs) @ coefficients.astype(np.float32)).reshape(pairs.delta_mesh.shape)
+def linear_regression_errors(coefficients, pairs, features=None):
+    """Per-vertex Euclidean errors (n, K, V) in mm of :func:`fit_linear_regression`'s map on ``pairs``
+    (``features``: the same kind of inputs it was fitted on)."""
+    x = motion_features(pairs) if features is None else features
+    predicted = (x @ coefficients.astype(np.float32)).reshape(pairs.delta_mesh.shape)
     return np.linalg.norm(predicted - pairs.delta_mesh, axis=-1)
 
 

@@ -152,6 +152,12 @@ def test_noise_free_pairs_are_the_worlds_exact_landmarks_and_captured_ones_diffe
     noise = (test_pairs.delta_landmarks - exact.delta_landmarks).std()
     assert 0.15 < noise < 0.25  # Timing.noise_mm = 0.2
     np.testing.assert_array_equal(exact.subjects, test_pairs.subjects)
+    np.testing.assert_array_equal(test_pairs.noise_free().delta_landmarks, exact.delta_landmarks)
+    # the exact Delta L_f is the world's own landmark function, evaluated independently here
+    first = test.subset([0])
+    face, w = first.face(int(first.subjects[0])), first.au_weights[0, exact.frames[0]].astype(np.float64)
+    truth = face.landmarks(w) - face.landmarks(np.zeros_like(w[0]))
+    np.testing.assert_allclose(exact.delta_landmarks[0], truth, atol=1e-4)
 
 
 def test_the_closed_form_regression_recovers_an_exactly_linear_world(test_pairs):
@@ -159,9 +165,25 @@ def test_the_closed_form_regression_recovers_an_exactly_linear_world(test_pairs)
     truth = rng.standard_normal((205, V * 3)).astype(np.float32) * 0.01
     fake = deformation.Pairs(test_pairs.neutral, test_pairs.delta_landmarks, None, test_pairs.frames,
                              test_pairs.labels, test_pairs.subjects)
-    fake.delta_mesh = (deformation._motion_features(fake) @ truth).reshape(*fake.delta_landmarks.shape[:2], V, 3)
+    fake.delta_mesh = (deformation.motion_features(fake) @ truth).reshape(*fake.delta_landmarks.shape[:2], V, 3)
     coef = deformation.fit_linear_regression(fake, penalty=1e-6)
     assert deformation.linear_regression_errors(coef, fake).max() < 1e-3
+
+
+def test_a_regression_on_identity_interactions_recovers_a_map_that_changes_with_the_face(test_pairs):
+    """If Delta M = (A + sum_k c_k B_k) [Delta L, 1], the identity features make it linear again."""
+    rng = np.random.default_rng(1)
+    n, c = len(test_pairs), 2
+    coeffs = rng.standard_normal((n, c))
+    x = deformation.identity_features(test_pairs, coeffs, coeffs)
+    assert x.shape == (test_pairs.delta_landmarks.shape[0] * test_pairs.delta_landmarks.shape[1], 205 * 3)
+    np.testing.assert_allclose(x[:, :205], deformation.motion_features(test_pairs))
+    truth = rng.standard_normal((205 * 3, V * 3)).astype(np.float32) * 0.01
+    fake = deformation.Pairs(test_pairs.neutral, test_pairs.delta_landmarks, None, test_pairs.frames,
+                             test_pairs.labels, test_pairs.subjects)
+    fake.delta_mesh = (x @ truth).reshape(*fake.delta_landmarks.shape[:2], V, 3)
+    coef = deformation.fit_linear_regression(fake, penalty=1e-6, features=x)
+    assert deformation.linear_regression_errors(coef, fake, features=x).max() < 1e-2
 
 
 def test_attention_entropy_is_between_zero_and_uniform_and_refused_without_attention(test_pairs):
