@@ -27,7 +27,7 @@ from facelib import baselines, evaluation, data, results, training
 COLUMNS = ["candidate", "settings", "Acc (%)", "Acc 95 % interval", "FID", "FID 95 % interval", "diversity",
            "motion (mm)", "training steps", "training (s)"]
 CANDIDATES = [  # (row name, model, settings changed from the recipe's defaults)
-    ("ACTOR, recipe", "actor", {}),
+    ("ACTOR, KL 1e-3 (world 1's recipe)", "actor", {"kl_weight": 1e-3}),
     ("ACTOR, KL 1e-2", "actor", {"kl_weight": 1e-2}),
     ("ACTOR, KL 3e-2", "actor", {"kl_weight": 3e-2}),
     ("ACTOR, KL 1e-4", "actor", {"kl_weight": 1e-4}),
