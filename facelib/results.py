@@ -187,6 +187,8 @@ def row_dicts(record):
 def stored_row(record, key):
     """The row of a stored result whose first cells are ``key`` (a tuple), e.g. ("label control (Alg. 1)",
     "ddpm", 200); an error that lists the rows' first cells when no row starts so."""
+    if isinstance(key, str):
+        raise TypeError(f"a row key is a tuple of the row's first cells, like ({key!r},), got the string {key!r}")
     key = tuple(key)
     for row in record["rows"]:
         if tuple(row[: len(key)]) == key:
@@ -200,7 +202,10 @@ def stored_value(record, key, column, interval=False):
     in the column after it instead."""
     if column not in record["columns"]:
         raise KeyError(f"results/{record['name']} has no column {column!r}; columns: {record['columns']}")
-    return stored_row(record, key)[record["columns"].index(column) + bool(interval)]
+    row, i = stored_row(record, key), record["columns"].index(column)
+    if interval and not (i + 1 < len(row) and _is_interval(row[i + 1])):
+        raise ValueError(f"results/{record['name']}: the column after {column!r} holds no 95 % interval in row {key}")
+    return row[i + bool(interval)]
 
 
 def stored_cell(record, key, column, digits=0):

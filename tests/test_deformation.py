@@ -171,17 +171,22 @@ def test_the_closed_form_regression_recovers_an_exactly_linear_world(test_pairs)
 
 
 def test_a_regression_on_identity_interactions_recovers_a_map_that_changes_with_the_face(test_pairs):
-    """If Delta M = (A + sum_k c_k B_k) [Delta L, 1], the identity features make it linear again."""
+    """Delta M = [Delta L, 1] (A + sum_k c_k B_k), with c the face's standardised identity coefficients: built
+    here per sequence, independently of identity_features, which must make it linear again."""
     rng = np.random.default_rng(1)
-    n, c = len(test_pairs), 2
-    coeffs = rng.standard_normal((n, c))
-    x = deformation.identity_features(test_pairs, coeffs, coeffs)
-    assert x.shape == (test_pairs.delta_landmarks.shape[0] * test_pairs.delta_landmarks.shape[1], 205 * 3)
-    np.testing.assert_allclose(x[:, :205], deformation.motion_features(test_pairs))
-    truth = rng.standard_normal((205 * 3, V * 3)).astype(np.float32) * 0.01
+    n, k = len(test_pairs), 2
+    coeffs = rng.standard_normal((n, k)) * 3.0 + 1.0
+    c = (coeffs - coeffs.mean(0)) / coeffs.std(0)
+    a, b = (rng.standard_normal((m, 205, V * 3)).astype(np.float32) * 0.01 for m in (1, k))
     fake = deformation.Pairs(test_pairs.neutral, test_pairs.delta_landmarks, None, test_pairs.frames,
                              test_pairs.labels, test_pairs.subjects)
-    fake.delta_mesh = (x @ truth).reshape(*fake.delta_landmarks.shape[:2], V, 3)
+    base = deformation.motion_features(fake).reshape(n, -1, 205)
+    fake.delta_mesh = np.stack([base[i] @ (a[0] + np.tensordot(c[i], b, 1)) for i in range(n)]).reshape(
+        *fake.delta_landmarks.shape[:2], V, 3)
+    x = deformation.identity_features(fake, coeffs, coeffs)
+    assert x.shape == (base.shape[0] * base.shape[1], 205 * (1 + k))
+    np.testing.assert_allclose(x[:, :205], base.reshape(-1, 205))
+    np.testing.assert_allclose(x[0, 205 + 3 * k + 1], base[0, 0, 3] * c[0, 1], rtol=1e-5)  # feature 3 x c_1
     coef = deformation.fit_linear_regression(fake, penalty=1e-6, features=x)
     assert deformation.linear_regression_errors(coef, fake, features=x).max() < 1e-2
 

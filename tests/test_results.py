@@ -158,6 +158,17 @@ def test_a_stored_number_is_found_by_its_row_key_and_column_with_its_interval(tm
         results.stored_row(record, ("ours", 100))
     with pytest.raises(KeyError, match="no column 'FID'"):
         results.stored_value(record, ("ours", 50), "FID")
+    with pytest.raises(ValueError, match="the column after 'steps' holds no 95 % interval"):
+        results.stored_value(record, ("ours", 50), "steps", interval=True)
+    with pytest.raises(TypeError, match="a row key is a tuple"):
+        results.stored_row(record, "ours")
+
+
+def test_a_stored_tables_header_names_its_file_relative_to_the_project(monkeypatch):
+    record = results.load_result(results.stored_results()[0])
+    assert f"*Stored result* `results/{record['name']}.json`" in results.markdown_table(record)
+    monkeypatch.setattr(results, "RESULTS_DIR", results.config.PROJECT_ROOT / "results" / "world2")
+    assert f"`results/world2/{record['name']}.json`" in results.markdown_table(record)
 
 
 def test_stored_numbers_keep_six_significant_digits_so_small_settings_survive():
