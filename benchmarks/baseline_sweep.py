@@ -15,7 +15,7 @@ config.ActorTraining and config.Motion3DGANTraining and are then trained at the 
 
     FACELIB_WORLD=2 python benchmarks/baseline_sweep.py --save baseline_sweep
 
-(11 candidates at a quarter of the budget: about 3 core-hours with one torch thread.)
+(12 candidates at a quarter of the budget: about 3 core-hours with one torch thread.)
 """
 import argparse
 import time
@@ -38,6 +38,7 @@ CANDIDATES = [  # (row name, model, settings changed from the recipe's defaults)
     ("Motion3DGAN, lr 5e-4", "motion3dgan", {"lr": 5e-4}),  # world 2: the rate is what moved it
     ("Motion3DGAN, lr 1e-3", "motion3dgan", {"lr": 1e-3}),
     ("Motion3DGAN, lr 2e-3", "motion3dgan", {"lr": 2e-3}),
+    ("Motion3DGAN, lr 5e-3", "motion3dgan", {"lr": 5e-3}),
 ]
 
 
