@@ -321,3 +321,23 @@ def steps_figure(record, figsize=(11, 3.3)):
         ax.legend(fontsize=7)
     fig.tight_layout()
     return fig
+
+
+def spiral_figure(canonical, faces, spirals, vertices, radius=14.0, figsize=(10, 4.4)):
+    """Spirals (SpiralNet++ neighbour orderings) of a few vertices on the template's canonical plane: one
+    panel per vertex of ``vertices`` ({title: vertex index}), one line per spiral of ``spirals`` ({length:
+    (V, length) indices}), the positions of the longest numbered, the triangles within ``radius`` mm of the
+    vertex drawn under them.  Returns the figure."""
+    fig, axes = plt.subplots(1, len(vertices), figsize=figsize, squeeze=False)
+    lengths = sorted(spirals, reverse=True)
+    for ax, (title, v) in zip(axes[0], vertices.items()):
+        for k, length in enumerate(lengths):
+            ax.plot(*canonical[spirals[length][v], :2].T, "-o", color=f"C{(k + 1) % 2}", ms=4, lw=1,
+                    label=f"L = {length}")
+        for position, u in enumerate(spirals[lengths[0]][v]):
+            ax.annotate(str(position), canonical[u, :2], fontsize=7, xytext=(3, 2), textcoords="offset points")
+        near = np.linalg.norm(canonical[:, :2] - canonical[v, :2], axis=1) < radius
+        ax.triplot(canonical[:, 0], canonical[:, 1], faces[near[faces].all(1)], color="0.85", lw=0.5, zorder=0)
+        ax.set(title=title, xlabel="x0 (mm)", ylabel="y0 (mm)", aspect="equal")
+        ax.legend(fontsize=8)
+    return fig

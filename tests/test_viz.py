@@ -47,3 +47,17 @@ def test_steps_figure_draws_one_line_per_task_and_sampler_with_its_interval():
     assert list(fid.lines[2].get_ydata()) == [3.0, 3.0] and acc.get_ylabel() == "Acc (%)"
     assert [t.get_text() for t in fid.get_legend().get_texts()][:2] == ["DDPM (Alg. 1)", "DDIM (Alg. 1)"]
     plt.close(fig)
+
+
+def test_spiral_figure_draws_each_spiral_of_each_vertex_and_numbers_the_longest():
+    from facelib.models import spiral
+    t = get_template()
+    spirals = {n: spiral.template_spirals(0, n) for n in (25, 9)}
+    where = {"mouth corner": t.vertex(27, 44), "cheek": t.vertex(40, 47)}
+    fig = viz.spiral_figure(t.canonical, t.faces, spirals, where)
+    for ax, v in zip(fig.axes, where.values()):
+        lines = [line for line in ax.get_lines() if line.get_label().startswith("L = ")]
+        assert [len(line.get_xdata()) for line in lines] == [25, 9]
+        np.testing.assert_array_equal(lines[1].get_xdata(), t.canonical[spirals[9][v], 0])
+        assert [a.get_text() for a in ax.texts] == [str(k) for k in range(25)]
+    plt.close(fig)
