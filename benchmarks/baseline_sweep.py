@@ -31,7 +31,7 @@ CANDIDATES = [  # (row name, model, settings changed from the recipe's defaults)
     ("ACTOR, KL 1e-2", "actor", {"kl_weight": 1e-2}),
     ("ACTOR, KL 3e-2", "actor", {"kl_weight": 3e-2}),
     ("ACTOR, KL 1e-4", "actor", {"kl_weight": 1e-4}),
-    ("Motion3DGAN, recipe", "motion3dgan", {}),
+    ("Motion3DGAN, recipe", "motion3dgan", {"lr": 1e-4}),  # the Motion3DGAN paper's recipe (world 1's)
     ("Motion3DGAN, lr 2e-4", "motion3dgan", {"lr": 2e-4}),
     ("Motion3DGAN, smoothing 2 frames", "motion3dgan", {"smoothing": 2.0}),
     ("Motion3DGAN, 3 critic steps", "motion3dgan", {"critic_steps": 3}),
