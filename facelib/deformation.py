@@ -228,9 +228,9 @@ def linear_regression_errors(coefficients, pairs, features=None):
     return np.linalg.norm(predicted - pairs.delta_mesh, axis=-1)
 
 
-def attention_entropy(model, pairs, batch_sequences=8):
-    """Entropy (nats) of the attention weights of Eq. 11 for every pair frame, (n, K); uniform weights
-    over the coarse vertices give log(num_coarse), one vertex only gives 0."""
+def attention_weights(model, pairs, batch_sequences=8):
+    """The attention weights of Eq. 11 over the coarse vertices for every pair frame, (n, K, num_coarse):
+    where on the face "ours" looks for each landmark motion (each row sums to 1)."""
     if not (model.config.attention and model.config.identity):
         raise ValueError("this deformer does not attend to the face: 'ours without attention' averages F_e, "
                          "S2D never reads the mesh; only 'ours' has Eq. 11's attention")
@@ -240,8 +240,15 @@ def attention_entropy(model, pairs, batch_sequences=8):
             sl = slice(s, s + batch_sequences)
             features = model.encode(torch.as_tensor(pairs.neutral[sl]))
             _, w = model.attend(features, torch.as_tensor(pairs.delta_landmarks[sl]) / model.config.scale)
-            out.append(-(w * torch.log(w.clamp_min(1e-30))).sum(-1).numpy())
+            out.append(w.numpy())
     return np.concatenate(out)
+
+
+def attention_entropy(model, pairs, batch_sequences=8):
+    """Entropy (nats) of the attention weights of Eq. 11 for every pair frame, (n, K); uniform weights
+    over the coarse vertices give log(num_coarse), one vertex only gives 0."""
+    w = attention_weights(model, pairs, batch_sequences).astype(np.float64)
+    return -(w * np.log(np.clip(w, 1e-30, None))).sum(-1)
 
 
 def per_face(errors, subjects):

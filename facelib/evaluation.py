@@ -66,6 +66,13 @@ class Evaluator:
             scores["diversity_ci"] = interval(lambda g: metrics.diversity(g, seed=seed), f)
         return scores
 
+    def accuracy_per_class(self, sequences, targets):
+        """{class name: accuracy (%) on the sequences requested as that class}, for the classes present
+        in ``targets``: whether guidance helps for every label, not only on average."""
+        targets = np.asarray(targets)
+        hits = self.features(sequences).argmax(1) == targets
+        return {self.class_names[c]: float(100 * hits[targets == c].mean()) for c in np.unique(targets)}
+
     @staticmethod
     def _accuracy(features, targets):
         return 100 * metrics.accuracy(features.argmax(1), targets)

@@ -62,6 +62,16 @@ DISTANCE_PAIRS = {  # iBUG-68 landmark pairs: "bone-length-like" distances of a 
 }
 
 
+def pair_distance(sequences, pair):
+    """Distance (mm) between the two landmarks of a DISTANCE_PAIRS entry (e.g. "mouth opening":
+    lip midpoints 51 and 57), for every frame: shape ``sequences.shape[:-2]``."""
+    if pair not in DISTANCE_PAIRS:
+        raise ValueError(f"unknown landmark pair {pair!r}; known: {sorted(DISTANCE_PAIRS)}")
+    i, j = DISTANCE_PAIRS[pair]
+    x = np.asarray(sequences, dtype=np.float64)
+    return np.linalg.norm(x[..., i, :] - x[..., j, :], axis=-1)
+
+
 def landmark_statistics(sequences):
     """Per-frame statistics of landmark sequences (n, F, 68, 3): mean inter-landmark distances (mm)
     of DISTANCE_PAIRS, and the mean frame-to-frame speed of a landmark (mm per frame)."""
@@ -137,6 +147,17 @@ def frame_speeds(sequences):
     return np.linalg.norm(x[:, 1:] - x[:, :-1], axis=-1).mean(-1)
 
 
+def steps_away_from_seams(known):
+    """Mask (n, F - 1) of the frame-to-frame steps between two unknown frames that do not touch a seam (no
+    known frame among the step's frames or their neighbours): where a filled sequence's own smoothness shows,
+    to compare with :func:`seam_steps`.  ``known`` (n, F) is True on the given frames."""
+    k = np.asarray(known, dtype=bool)
+    if k.ndim != 2:
+        raise ValueError(f"known must be an (n, F) mask, got shape {k.shape}")
+    padded = np.pad(k, ((0, 0), (1, 1)), constant_values=False)
+    return ~(padded[:, :-3] | padded[:, 1:-2] | padded[:, 2:-1] | padded[:, 3:])
+
+
 def seam_steps(sequences, known):
     """Seam smoothness: the frame-to-frame motion (mm/frame, as :func:`frame_speeds`) across every
     boundary between a known and an unknown frame.  A seam is invisible when this step is no larger
@@ -152,6 +173,14 @@ def intervals_overlap(a, b):
     """True when the intervals a = (low, high) and b share a point: the data cannot order the two
     estimates (the book reads a difference only where the 95 % intervals separate)."""
     return a[0] <= b[1] and b[0] <= a[1]
+
+
+def interval_order(a, b):
+    """How estimate a compares with b, read from their 95 % intervals (low, high): "lower" or
+    "higher" where the intervals separate, "overlaps" where the data cannot order them."""
+    if intervals_overlap(a, b):
+        return "overlaps"
+    return "lower" if a[1] < b[0] else "higher"
 
 
 def bootstrap_interval(statistic, *samples, num_resamples=1000, level=0.95, seed=0):

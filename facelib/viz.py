@@ -341,3 +341,62 @@ def spiral_figure(canonical, faces, spirals, vertices, radius=14.0, figsize=(10,
         ax.set(title=title, xlabel="x0 (mm)", ylabel="y0 (mm)", aspect="equal")
         ax.legend(fontsize=8)
     return fig
+
+
+def tradeoff_figure(scores, title="", figsize=(7, 4.2)):
+    """Control against realism: one point per setting of ``scores`` ({name: evaluation score with
+    "accuracy", "fid" and their "_ci" 95 % intervals}), IC accuracy against FID (log scale), each with its
+    intervals as error bars; circles for Adagrad rates, triangles for mean-shift scales, crosses for the rest
+    (by the name's first word).  Returns the figure."""
+    import matplotlib.ticker as mticker
+
+    fig, ax = plt.subplots(figsize=figsize)
+    for name, s in scores.items():
+        marker = {"Adagrad,": "o", "mean": "^"}.get(name.split()[0], "x")
+        errors = [np.abs(np.array(s[k + "_ci"], dtype=float)[:, None] - s[k]) for k in ("fid", "accuracy")]
+        ax.errorbar(s["fid"], s["accuracy"], xerr=errors[0], yerr=errors[1], capsize=2, marker=marker, ls="none",
+                    label=name)
+    ax.set(xlabel="FID (lower is better, log scale)", ylabel="IC accuracy (%)", xscale="log", title=title)
+    ax.xaxis.set_major_locator(mticker.LogLocator(subs=(1, 2, 5)))
+    ax.xaxis.set_major_formatter(mticker.FormatStrFormatter("%g"))
+    ax.xaxis.set_minor_formatter(mticker.NullFormatter())
+    ax.legend(fontsize=8)
+    return fig
+
+
+def grouped_bars(ax, groups, values, ylabel="", title=""):
+    """Bars of several series side by side per group: ``values`` {series name: one value per group}
+    (e.g. accuracy per requested label, guided against unguided), the group names under the bars."""
+    width = 0.8 / len(values)
+    for j, (name, v) in enumerate(values.items()):
+        ax.bar(np.arange(len(groups)) + (j - (len(values) - 1) / 2) * width, v, width, label=name)
+    ax.set_xticks(np.arange(len(groups)), groups, rotation=30, ha="right", fontsize=8)
+    ax.set(ylabel=ylabel, title=title)
+    ax.legend(fontsize=8, ncol=len(values), loc="upper center")
+
+
+def shade_missing_frames(ax, known):
+    """Grey background over the missing frames of a (F,) mask ``known`` (True: a given frame), white over the
+    given ones: the frames an expression-filling plot must generate."""
+    known = np.asarray(known, dtype=bool)
+    edges = np.diff(np.r_[0, known.astype(int), 0])
+    ax.axvspan(-0.5, len(known) - 0.5, color="0.93")
+    for start, stop in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)):
+        ax.axvspan(start - 0.5, stop - 0.5, color="white")
+
+
+def confusion_figure(counts, class_names, title="", figsize=(6.5, 5.5)):
+    """A confusion matrix ``counts`` (true x predicted, as :func:`facelib.metrics.confusion_matrix`) coloured
+    by the fraction of each true class, with the non-zero counts written in the cells.  Returns the figure."""
+    counts = np.asarray(counts)
+    fig, ax = plt.subplots(figsize=figsize)
+    im = ax.imshow(counts / np.maximum(counts.sum(1, keepdims=True), 1), cmap="Blues", vmin=0, vmax=1)
+    for i, j in zip(*np.nonzero(counts)):
+        colour = "white" if counts[i, j] > counts[i].sum() / 2 else "black"
+        ax.text(j, i, counts[i, j], ha="center", va="center", fontsize=7, color=colour)
+    ax.set_xticks(range(len(counts)), class_names, rotation=60, ha="right", fontsize=8)
+    ax.set_yticks(range(len(counts)), class_names, fontsize=8)
+    ax.set(xlabel="predicted", ylabel="true", title=title)
+    ax.grid(False)
+    fig.colorbar(im, ax=ax, shrink=0.7, label="fraction of the true class")
+    return fig

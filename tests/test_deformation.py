@@ -195,7 +195,9 @@ def test_attention_entropy_is_between_zero_and_uniform_and_refused_without_atten
     torch.manual_seed(0)
     model = deformation.build_model("ours").eval()
     h = deformation.attention_entropy(model, test_pairs)
-    assert h.shape == test_pairs.delta_landmarks.shape[:2]
+    w = deformation.attention_weights(model, test_pairs)
+    assert w.shape == (*test_pairs.delta_landmarks.shape[:2], model.num_coarse)
+    assert np.allclose(w.sum(-1), 1, atol=1e-5) and h.shape == test_pairs.delta_landmarks.shape[:2]
     assert np.all(h >= 0) and np.all(h <= np.log(model.num_coarse) + 1e-5)
     for other in ("no_attention", "s2d"):
         with pytest.raises(ValueError, match="does not attend to the face"):

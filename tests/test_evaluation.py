@@ -108,6 +108,16 @@ def test_compare_runs_and_scores_every_generator_with_its_time():
     assert all(r["seconds"] >= 0 and "fid_ci" in r for r in rows.values())
 
 
+def test_accuracy_per_class_averages_back_to_the_accuracy():
+    ev = evaluation.load_evaluator("coma", "I")
+    test = data.load_dataset("coma", "test")
+    x, y = test.landmarks[:48], test.targets("I")[:48]
+    per_class = ev.accuracy_per_class(x, y)
+    assert set(per_class) == {ev.class_names[c] for c in np.unique(y)}
+    counts = np.bincount(y)[np.unique(y)]
+    assert np.isclose(np.average(list(per_class.values()), weights=counts), ev.score(x, y)["accuracy"])
+
+
 def test_a_guide_reads_clean_sequences_well_and_pure_noise_at_chance():
     from facelib import tasks
     test = data.load_dataset("coma", "test")

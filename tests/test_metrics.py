@@ -30,3 +30,19 @@ def test_completion_spread_is_the_mean_pairwise_distance_on_the_unknown_frames()
     assert np.isclose(metrics.completion_spread(c, known)[0], (3 + 0 + 3) / 3)
     with pytest.raises(ValueError, match="K >= 2"):
         metrics.completion_spread(c[:, :1], known)
+
+
+def test_pair_distance_is_the_distance_of_the_named_landmarks_per_frame():
+    x = np.zeros((2, 3, 68, 3))
+    x[..., 57, 1] = -np.arange(3.0)  # the lower lip drops 0, 1, 2 mm
+    assert np.allclose(metrics.pair_distance(x, "mouth opening"), [[0, 1, 2]] * 2)
+    with pytest.raises(ValueError, match="unknown landmark pair 'mouth'.*mouth opening"):
+        metrics.pair_distance(x, "mouth")
+
+
+def test_steps_away_from_seams_skip_every_step_that_touches_a_known_frame():
+    known = np.array([[True, False, False, False, False, True]])  # frames 0 and 5 given
+    # steps 0-1 and 4-5 cross a seam, 1-2 and 3-4 touch one: only 2-3 is away from both
+    assert metrics.steps_away_from_seams(known).tolist() == [[False, False, True, False, False]]
+    with pytest.raises(ValueError, match=r"\(n, F\) mask"):
+        metrics.steps_away_from_seams(known[0])

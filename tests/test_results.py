@@ -142,6 +142,8 @@ def test_markdown_table_merges_interval_columns_and_keeps_small_settings(tmp_res
 def test_intervals_overlap_and_rows_as_dicts(tmp_results):
     assert metrics.intervals_overlap((1.0, 3.0), (2.0, 5.0)) and metrics.intervals_overlap((1.0, 2.0), (2.0, 3.0))
     assert not metrics.intervals_overlap((1.0, 2.0), (2.5, 3.0))
+    assert [metrics.interval_order(a, (2.0, 3.0)) for a in ((0.5, 1.5), (2.5, 4.0), (3.5, 4.0))] == [
+        "lower", "overlaps", "higher"]
     _save()
     assert results.row_dicts(results.load_result("demo")) == [
         {"method": "ours", "Acc (%)": 80.0, "95 % interval": [75.0, 85.0]}]

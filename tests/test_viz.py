@@ -61,3 +61,40 @@ def test_spiral_figure_draws_each_spiral_of_each_vertex_and_numbers_the_longest(
         np.testing.assert_array_equal(lines[1].get_xdata(), t.canonical[spirals[9][v], 0])
         assert [a.get_text() for a in ax.texts] == [str(k) for k in range(25)]
     plt.close(fig)
+
+
+def test_tradeoff_figure_draws_each_setting_at_its_fid_and_accuracy():
+    scores = {"Adagrad, lr 0.03": dict(accuracy=70.0, accuracy_ci=(60.0, 80.0), fid=2.0, fid_ci=(1.0, 4.0)),
+              "no guidance": dict(accuracy=10.0, accuracy_ci=(5.0, 15.0), fid=5.0, fid_ci=(3.0, 8.0))}
+    ax = viz.tradeoff_figure(scores, "title").axes[0]
+    points = [c.get_children()[0] for c in ax.containers]  # each errorbar's data line
+    assert [tuple(p.get_xydata()[0]) for p in points] == [(2.0, 70.0), (5.0, 10.0)]
+    assert [p.get_marker() for p in points] == ["o", "x"] and ax.get_xscale() == "log"
+    plt.close("all")
+
+
+def test_grouped_bars_draw_one_bar_per_series_and_group():
+    fig, ax = plt.subplots()
+    viz.grouped_bars(ax, ["a", "b", "c"], {"x": [1, 2, 3], "y": [4, 5, 6]}, "acc", "t")
+    heights = [p.get_height() for p in ax.patches]
+    assert heights == [1, 2, 3, 4, 5, 6] and [t.get_text() for t in ax.get_xticklabels()] == ["a", "b", "c"]
+    plt.close("all")
+
+
+def test_shade_missing_frames_leaves_each_run_of_given_frames_white():
+    fig, ax = plt.subplots()
+    viz.shade_missing_frames(ax, [True, True, False, False, True])
+    spans = [(p.get_facecolor()[:3], p.get_x(), p.get_x() + p.get_width()) for p in ax.patches]
+    grey, white = (0.93,) * 3, (1.0, 1.0, 1.0)
+    assert [(tuple(np.round(c, 2)), a, b) for c, a, b in spans] == [
+        (grey, -0.5, 4.5), (white, -0.5, 1.5), (white, 3.5, 4.5)]
+    plt.close("all")
+
+
+def test_confusion_figure_writes_each_nonzero_count_in_its_cell():
+    counts = np.array([[3, 1], [0, 2]])
+    ax = viz.confusion_figure(counts, ["a", "b"], "t").axes[0]
+    written = {(t.get_position(), t.get_text()) for t in ax.texts}
+    assert written == {((0, 0), "3"), ((1, 0), "1"), ((1, 1), "2")}
+    assert np.allclose(ax.images[0].get_array(), [[0.75, 0.25], [0, 1]])
+    plt.close("all")
