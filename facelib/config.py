@@ -191,6 +191,22 @@ class GuideTraining(Optimisation):
 
 
 @dataclass(frozen=True)
+class AURegressorTraining(Optimisation):
+    """The noisy AU-intensity regressor R(x_t, t) of the fine-control chapter (not in the paper): the mean
+    squared error of its per-frame AU intensities against the curves that made x_0."""
+
+    steps: int = 3000  # our choice: the guidance classifier's budget
+    lr: float = 3e-4
+    warmup: int = 200
+    final_lr_fraction: float = 0.05
+    weight_decay: float = 0.01
+    grad_clip: float | None = 1.0
+    dataset: str = "coma"  # the unconditional DDPM it steers (denoiser_coma)
+    num_diffusion_steps: int = 2000  # the DDPM's schedule: x_t must look like the sampler's
+    schedule: str = "linear"
+
+
+@dataclass(frozen=True)
 class TextHeadTraining(Optimisation):
     """The text head BiT(x_t, t) of Alg. 2 (§3.2, §5.2)."""
 
@@ -536,6 +552,33 @@ class TextControl(Sampling):
     def paper(self):
         return replace(super().paper(), score="cosine", head_input="x_t", vocabulary=False, particles=1, max_time=None,
                        guidance_weight=GUIDANCE_WEIGHT)  # §4: lambda = 0.01
+
+
+AU_CURVE_TOLERANCE = 0.1  # tau of AU-curve control: log N(c | R(x_t, t), tau^2), in AU intensity units (our choice)
+AU_CURVE_LR = 0.03  # the Adagrad rate of AU-curve control at AU_CURVE_STEPS steps (our choice; the fine-control chapter)
+
+
+@dataclass(frozen=True)
+class AUControl(Sampling):
+    """AU-curve control (not in the paper; the fine-control chapter): Alg. 1's 3 Adagrad steps per reverse
+    step on lambda log p_theta + log N(c | R(x, t-1), tau^2), R the noisy AU regressor and c the requested
+    curves of the constrained AUs; or the classic mean shift along the same score."""
+
+    steps: int | None = 50
+    dataset: str = "coma"  # the unconditional denoiser denoiser_<dataset> and the regressor au_regressor_<dataset>
+    method: str = "adagrad"  # "adagrad" (Alg. 1's optimisation) or "mean_shift"
+    guidance_weight: float = GUIDANCE_WEIGHT  # lambda (Alg. 1's)
+    lr: float | None = None  # None: AU_CURVE_LR at 50 steps, scaled to the steps as label control's rate
+    scale: float = MEAN_SHIFT_SCALE  # the mean shift's s
+    tolerance: float = AU_CURVE_TOLERANCE
+
+    def __post_init__(self):
+        super().__post_init__()
+        _check_choice("method", self.method, GUIDANCE_METHODS)
+        _check_number("the guidance weight (lambda)", self.guidance_weight)
+        _check_number("lr", self.lr, allow_none=True)
+        _check_number("scale", self.scale)
+        _check_number("tolerance", self.tolerance, low=1e-6)
 
 
 @dataclass(frozen=True)

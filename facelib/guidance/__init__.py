@@ -4,9 +4,9 @@ docstrings."""
 from .classifier_free import ClassifierFree
 from .hooks import (BestOfK, MeanShiftGuidance, OptimisationGuidance, ReconstructionGuidance, best_particles, chain,
                     gradient_at, log_p_theta, steps_of)
-from .scores import (ClassifierScore, ContrastiveScore, CosineScore, DenoisedCosineScore, match_log_weights,
+from .scores import (AUCurveScore, ClassifierScore, ContrastiveScore, CosineScore, DenoisedCosineScore, match_log_weights,
                      nearest_wording, vocabulary_log_weights)
 
 __all__ = ["ClassifierFree", "BestOfK", "MeanShiftGuidance", "OptimisationGuidance", "ReconstructionGuidance", "best_particles", "chain",
-           "gradient_at", "log_p_theta", "steps_of", "ClassifierScore", "ContrastiveScore", "CosineScore",
+           "gradient_at", "log_p_theta", "steps_of", "AUCurveScore", "ClassifierScore", "ContrastiveScore", "CosineScore",
            "DenoisedCosineScore", "match_log_weights", "nearest_wording", "vocabulary_log_weights"]

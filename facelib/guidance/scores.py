@@ -11,6 +11,8 @@ scored against the n texts or labels repeated K times.
 * :class:`CosineScore`: cos(BiT(x, t), E(c)) of the text head (Alg. 2, Eq. 10).
 * :class:`ContrastiveScore` (not in the paper): log sum_n w_n p(r_n | x, t), the head's probability of
   the descriptions r_n that the text c matches.
+* :class:`AUCurveScore` (not in the paper): log N(c | R(x, t), tau^2) of requested AU-intensity curves c
+  under the noisy AU regressor R, on the constrained AUs and frames only.
 * :class:`DenoisedCosineScore` (not in the paper; the "forward universal guidance" of Bansal et al. 2023):
   Eq. 10 read on the denoiser's estimate x0_hat(x, t) instead of on x.
 """
@@ -70,6 +72,32 @@ class CosineScore(_ChainScore):
 
     def __call__(self, x, t):
         return self.network.cosine(x, t, _repeated(torch.as_tensor(self.text_embeddings), len(x)).to(x.device))
+
+
+@dataclass
+class AUCurveScore(_ChainScore):
+    """score(x, t) = -sum over the constrained (frame, AU) of (R(x, t) - c)^2 / (2 tau^2) (B,): the Gaussian
+    log-likelihood (up to a constant) of requested AU curves c (n, F, A) under the AU regressor R, where
+    ``constrained`` (n, F, A) is True (AUs a request leaves free do not count)."""
+
+    network: torch.nn.Module
+    curves: torch.Tensor
+    constrained: torch.Tensor
+    tolerance: float
+
+    def __post_init__(self):
+        self.curves = torch.as_tensor(self.curves, dtype=torch.float32)
+        self.constrained = torch.as_tensor(self.constrained, dtype=torch.bool)
+        if self.curves.ndim != 3 or self.constrained.shape != self.curves.shape:
+            raise ValueError(f"curves and constrained must be two (n, F, A) arrays of one shape, got "
+                             f"{tuple(self.curves.shape)} and {tuple(self.constrained.shape)}")
+        _check_positive("tolerance", self.tolerance)
+
+    def __call__(self, x, t):
+        c = _repeated(self.curves, len(x)).to(device=x.device, dtype=x.dtype)
+        m = _repeated(self.constrained, len(x)).to(x.device)
+        squared = torch.where(m, (self.network(x, t) - c) ** 2, torch.zeros((), dtype=x.dtype, device=x.device))
+        return -squared.sum((1, 2)) / (2 * self.tolerance ** 2)
 
 
 def nearest_wording(description_table, text_embeddings):

@@ -13,6 +13,8 @@ from ..config import TEXT_DATASET, with_overrides
 from ..data import LandmarkNormalizer
 from ..diffusion import GaussianDiffusion, named_betas
 from ..face.sequences import check_num_frames
+from ..face.aus import AU_NAMES
+from ..models.au_regressor import AURegressor, AURegressorConfig
 from ..models.denoiser import Denoiser, DenoiserConfig
 from ..models.noisy_classifier import NoisyClassifier, NoisyClassifierConfig, NoisyTextHead, TextHeadConfig
 from ..text import EMBEDDING_DIM, MODEL_NAME
@@ -120,6 +122,19 @@ def load_text_head(dataset=TEXT_DATASET, name=None):
         raise ValueError(f"checkpoint {name} was trained with the text encoder {meta.get('text_encoder')!r} "
                          f"({model.config.embedding_dim}-d), not {MODEL_NAME!r} ({EMBEDDING_DIM}-d)")
     return TrainedGuide(model, dataset, "text", names, LandmarkNormalizer.from_dict(meta["normalizer"]), meta)
+
+
+def load_au_regressor(dataset="coma", name=None):
+    """Load the shipped AU regressor au_regressor_<dataset> (R(x_t, t) of AU-curve control; sha256 and its
+    AUs checked), as a guidance network whose "classes" are the world's AU names."""
+    data.check_dataset_name(dataset)
+    name = name or f"au_regressor_{dataset}"
+    model, meta = load_checkpoint(name, "au_regressor", lambda c: AURegressor(AURegressorConfig(**c)))
+    if model.config.num_aus != len(AU_NAMES):
+        raise ValueError(f"checkpoint {name} regresses {model.config.num_aus} AUs; the world has {len(AU_NAMES)}")
+    if meta["training"]["dataset"] != dataset:
+        raise ValueError(f"checkpoint {name} was trained on {meta['training']['dataset']!r}, not {dataset!r}")
+    return TrainedGuide(model, dataset, "au", AU_NAMES, LandmarkNormalizer.from_dict(meta["normalizer"]), meta)
 
 
 def check_same_space(denoiser, guide):

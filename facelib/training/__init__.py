@@ -17,12 +17,12 @@ from pathlib import Path
 from .. import results
 from ..checkpoints import check_world, checkpoint_paths, save_checkpoint
 from .loop import Draws, TrainingLog, fit, is_main_process
-from .recipes import (RECIPES, SETTINGS, ActorRecipe, DeformationRecipe, DenoiserRecipe, EvaluatorRecipe, GuideRecipe,
+from .recipes import (RECIPES, SETTINGS, ActorRecipe, AURegressorRecipe, DeformationRecipe, DenoiserRecipe, EvaluatorRecipe, GuideRecipe,
                       LSTMFillerRecipe, Motion3DGANRecipe, MotionClipRecipe, TextHeadRecipe, swap_anatomy,
                       text_head_loss, training_anatomies)
 from .shipped import SHIPPED
 
-__all__ = ["Draws", "TrainingLog", "fit", "is_main_process", "RECIPES", "SETTINGS", "ActorRecipe", "DeformationRecipe",
+__all__ = ["Draws", "TrainingLog", "fit", "is_main_process", "RECIPES", "SETTINGS", "ActorRecipe", "AURegressorRecipe", "DeformationRecipe",
            "DenoiserRecipe", "EvaluatorRecipe", "GuideRecipe", "LSTMFillerRecipe", "Motion3DGANRecipe",
            "MotionClipRecipe", "TextHeadRecipe", "swap_anatomy", "text_head_loss", "training_anatomies", "SHIPPED",
            "recipe", "settings_for", "save_trained", "train_and_save", "train_all"]

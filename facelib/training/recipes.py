@@ -18,6 +18,7 @@ from .. import config, data, deformation, srvf
 from ..diffusion import GaussianDiffusion, named_betas
 from ..inpainting import FILL_SETTINGS, fill_masks
 from ..models import actor, lstm_filler, motion3dgan, motionclip
+from ..models.au_regressor import AURegressor, AURegressorConfig
 from ..models.classifier import LSTMClassifier
 from ..models.denoiser import Denoiser, DenoiserConfig
 from ..models.deformer import deformation_loss
@@ -188,6 +189,30 @@ class GuideRecipe(_NoisyRecipe):
 
     def checkpoint_name(self):
         return f"guide_{self.settings.dataset}_{self.settings.classifier_type}"
+
+
+class AURegressorRecipe(_NoisyRecipe):
+    """R(x_t, t) of the fine-control chapter: mean squared error of the per-frame AU intensities of noisy
+    sequences against the intensities that made them (``FaceDataset.au_weights``)."""
+
+    kind = "au_regressor"
+
+    def __init__(self, settings=config.AURegressorTraining(), model_config=None):
+        self._prepare(settings)
+        self.name = f"AU regressor ({settings.dataset})"
+        self.au_weights = torch.as_tensor(self.train.au_weights, dtype=torch.float32)
+        self.architecture = model_config or AURegressorConfig()
+
+    def build(self, generator):
+        return AURegressor(self.architecture)
+
+    def loss(self, model, draws):
+        predicted, idx = self.noisy_batch(model, draws)
+        loss = nn.functional.mse_loss(predicted, self.au_weights[idx])
+        return loss, {"loss": loss.item()}
+
+    def checkpoint_name(self):
+        return f"au_regressor_{self.settings.dataset}"
 
 
 def text_head_loss(output, table, labels, kinds, choice, contrastive_weight=1.0, temperature=0.05):
@@ -496,8 +521,10 @@ class DeformationRecipe(Recipe):
 
 RECIPES = {"denoiser": DenoiserRecipe, "guide": GuideRecipe, "text_head": TextHeadRecipe,
            "evaluator": EvaluatorRecipe, "actor": ActorRecipe, "motionclip": MotionClipRecipe,
-           "motion3dgan": Motion3DGANRecipe, "lstm_filler": LSTMFillerRecipe, "deformer": DeformationRecipe}
+           "motion3dgan": Motion3DGANRecipe, "lstm_filler": LSTMFillerRecipe, "deformer": DeformationRecipe,
+           "au_regressor": AURegressorRecipe}
 SETTINGS = {"denoiser": config.DenoiserTraining, "guide": config.GuideTraining, "text_head": config.TextHeadTraining,
             "evaluator": config.EvaluatorTraining, "actor": config.ActorTraining,
             "motionclip": config.MotionClipTraining, "motion3dgan": config.Motion3DGANTraining,
-            "lstm_filler": config.LSTMFillerTraining, "deformer": config.DeformationTraining}
+            "lstm_filler": config.LSTMFillerTraining, "deformer": config.DeformationTraining,
+            "au_regressor": config.AURegressorTraining}

@@ -35,3 +35,5 @@ if config.WORLD == 2:
     # Issue 25: Table 5 over three training seeds for ours, ours without attention and S2D (seed 0 is above).
     SHIPPED.update({f"deform_{m}_{s}_seed{k}": ("deformer", {"method": m, "split": s, "seed": k})
                     for m in ("ours", "no_attention", "s2d") for s in ("identity", "expression") for k in (1, 2)})
+    # Issue 28: the noisy AU-intensity regressor of AU-curve control (the fine-control chapter).
+    SHIPPED["au_regressor_coma"] = ("au_regressor", {})
