@@ -617,6 +617,28 @@ class Fill(Sampling):
         return replace(super().paper(), reconstruction_scale=0.0, resample=1)  # Alg. 3 as printed
 
 
+KEYFRAME_METHODS = ("replace", "reconstruction", "both")
+
+
+@dataclass(frozen=True)
+class Keyframes(Sampling):
+    """Landmark keyframes (not in the paper; the fine-control chapter): chosen landmarks at chosen frames.
+    "replace": Alg. 3 on coordinates (the constrained landmarks re-drawn from q(x_{t-1} | x_0));
+    "reconstruction": reconstruction guidance on them; "both": the two together, as OmniControl's spatial
+    guidance with inpainting."""
+
+    steps: int | None = 100  # the filling chapter's chain (Fill)
+    variance: str | None = "posterior"
+    dataset: str = "coma"
+    method: str = "both"
+    reconstruction_scale: float = RECONSTRUCTION_SCALE
+
+    def __post_init__(self):
+        super().__post_init__()
+        _check_choice("method", self.method, KEYFRAME_METHODS)
+        _check_number("the reconstruction guidance scale", self.reconstruction_scale)
+
+
 @dataclass(frozen=True)
 class GeometryAdaptive(Sampling):
     """Alg. 4 (geometry-adaptive generation with the type-S classifier), with the book's additions."""

@@ -90,7 +90,8 @@ class KnownFrames:
     frames from q(x_{t-1} | x_0).  ``inner`` is applied first: the guidance of Alg. 4 line 12.
 
     x0: (B, F, 68, 3) in the model's normalised space (values on unknown frames are ignored);
-    known: (B, F) bool.  Deterministic through ``generator``.
+    known: (B, F) bool, or (B, F, 68) bool to know single landmarks of a frame (keyframes: inpainting on
+    coordinates instead of frames).  Deterministic through ``generator``.
     """
 
     diffusion: GaussianDiffusion
@@ -111,12 +112,17 @@ class KnownFrames:
         return self.merge(noise, self.noised(self.diffusion.num_steps))
 
     def merge(self, unknown, known):
-        return torch.where(self.known[:, :, None, None], known, unknown)
+        return torch.where(known_coordinates(self.known), known, unknown)
 
     def __call__(self, x_hat, xt, t, out):
         if self.inner is not None:
             x_hat = self.inner(x_hat, xt, t, out)
         return self.merge(x_hat, self.noised(t - 1))
+
+
+def known_coordinates(known):
+    """A known mask (B, F) of frames or (B, F, 68) of landmarks as a (B, F, 68 or 1, 1) mask of coordinates."""
+    return known[:, :, None, None] if known.ndim == 2 else known[..., None]
 
 
 def mean_imputation(sequences, known):

@@ -140,8 +140,8 @@ class ReconstructionGuidance:
 
     model: torch.nn.Module
     diffusion: GaussianDiffusion
-    x0: torch.Tensor  # (B, F, 68, 3), normalised; only the known frames are read
-    known: torch.Tensor  # (B, F) bool
+    x0: torch.Tensor  # (B, F, 68, 3), normalised; only the known frames (or landmarks) are read
+    known: torch.Tensor  # (B, F) bool, or (B, F, 68) bool: known landmarks of a frame (keyframes)
     scale: float = 1.0
 
     def __post_init__(self):
@@ -151,7 +151,9 @@ class ReconstructionGuidance:
     def known_error(self, x, t):
         """||x0_hat(x)|S_K - x_0|S_K|| per sequence (B,)."""
         eps = self.model(x, t)
-        return (((self.diffusion.predict_x0(x, t, eps) - self.x0) ** 2).sum((2, 3)) * self.known).sum(1).sqrt()
+        squared = ((self.diffusion.predict_x0(x, t, eps) - self.x0) ** 2).sum(-1)  # (B, F, 68)
+        known = self.known if self.known.ndim == 3 else self.known[:, :, None]
+        return (squared * known).sum((1, 2)).sqrt()
 
     def __call__(self, x_hat, xt, t, out):
         return x_hat - self.scale * gradient_at(xt, lambda x: self.known_error(x, t))

@@ -8,6 +8,7 @@ label-conditional denoiser instead).
 * ``geometry``       geometry-adaptive generation, Alg. 4
 * ``edit``           a given sequence inverted by DDIM and regenerated under label control (not in the paper)
 * ``au``             AU-curve control: action units that follow requested intensity curves (not in the paper)
+* ``keyframes``      chosen landmarks at chosen frames, a natural sequence around them (not in the paper)
 * ``loading``        the trained denoiser and guidance networks they sample with
 
 Every task is called as ``task(what, n, settings, models..., progress, **overrides)``: ``settings`` is the
@@ -19,6 +20,7 @@ from .au import au_control, data_ranges, parse_curve, requested_curves
 from .decoder import decoder_then_diffusion
 from .edit import check_sequences, edit, invert, keep_on_path
 from .fill import fill
+from .keyframes import check_keys, key_errors, keyframes, read_constraints
 from .geometry import geometry_adaptive, geometry_passes, order_sensitive_label, table4_inputs
 from .label import (adagrad_lr, check_labels, label_control, label_sampler, load_conditional_denoiser, step_scaled_lr,
                     table1_generators)
@@ -27,7 +29,7 @@ from .loading import (TrainedDenoiser, TrainedGuide, check_same_space, load_au_r
 from .text import text_control, text_guidance_weight, text_lr, text_score
 from .unconditional import unconditional
 
-__all__ = ["au_control", "data_ranges", "parse_curve", "requested_curves", "load_au_regressor", "decoder_then_diffusion", "check_sequences", "edit", "invert", "keep_on_path", "check_labels",
+__all__ = ["check_keys", "key_errors", "keyframes", "read_constraints", "au_control", "data_ranges", "parse_curve", "requested_curves", "load_au_regressor", "decoder_then_diffusion", "check_sequences", "edit", "invert", "keep_on_path", "check_labels",
            "label_sampler", "load_conditional_denoiser", "table1_generators", "fill", "geometry_adaptive",
            "geometry_passes", "order_sensitive_label", "table4_inputs", "adagrad_lr", "label_control",
            "step_scaled_lr", "TrainedDenoiser", "TrainedGuide", "check_same_space", "load_denoiser",

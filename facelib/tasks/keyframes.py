@@ -1,0 +1,114 @@
+"""Landmark keyframes (not in the paper; the fine-control chapter): "put the left mouth corner 8 mm higher at
+frame 25", and a natural sequence around it.  OmniControl and GMD control chosen body joints at chosen frames;
+this is the same for the 68 facial landmarks.
+
+A keyframe constrains one landmark at one frame, to an absolute ``position`` (mm) or to a ``displacement``
+(mm) from the given neutral face.  With a neutral face the sequence starts from it (frame 0 known, as
+geometry-adaptive generation's N2E order).  The constrained coordinates are conditioned on like the known
+frames of expression filling (Alg. 3 on coordinates instead of frames, "replace"), by reconstruction
+guidance on them ("reconstruction"), or both.
+
+The constraints file of ``python -m facelib sample keyframes --constraints keys.json``::
+
+    {"neutral": [[x, y, z], ... 68 rows] (optional, mm),
+     "keys": [{"frame": 25, "landmark": 54, "displacement": [0, 8, 0]},
+              {"frame": 10, "landmark": 8, "position": [0.5, -60.2, 12.0]}]}
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from ..config import Keyframes
+from ..guidance import ReconstructionGuidance
+from ..inpainting import KnownFrames
+from .fill import known_noise
+from .loading import load_denoiser, task_settings
+
+KEY_FIELDS = ("frame", "landmark")
+KEY_TARGETS = ("position", "displacement")
+
+
+def check_keys(keys, num_frames=40, neutral=None):
+    """The keys (a list of dicts, see the module docstring) as targets (F, 68, 3) in mm and their mask (F, 68);
+    with a neutral face (68, 3), frame 0 is that face and displacements are taken from it.  A clear error for a
+    missing field, a frame or landmark out of range, a key given twice or a displacement without a face."""
+    if not isinstance(keys, (list, tuple)) or not keys:
+        raise ValueError(f"keys must be a non-empty list of {{'frame', 'landmark', 'position' or 'displacement'}}, "
+                         f"got {keys!r}")
+    given, mask = np.zeros((num_frames, 68, 3)), np.zeros((num_frames, 68), dtype=bool)
+    if neutral is not None:
+        given[0], mask[0] = neutral, True
+    for key in keys:
+        targets = [k for k in KEY_TARGETS if isinstance(key, dict) and k in key]
+        if not isinstance(key, dict) or any(k not in key for k in KEY_FIELDS) or len(targets) != 1:
+            raise ValueError(f"a key needs 'frame', 'landmark' and one of 'position' or 'displacement', got {key!r}")
+        frame, landmark, value = key["frame"], key["landmark"], np.asarray(key[targets[0]], dtype=np.float64)
+        if not isinstance(frame, int) or not 0 <= frame < num_frames:
+            raise ValueError(f"key {key!r}: the frame must be an integer in 0..{num_frames - 1}")
+        if not isinstance(landmark, int) or not 0 <= landmark < 68:
+            raise ValueError(f"key {key!r}: the landmark must be an iBUG-68 index in 0..67")
+        if value.shape != (3,) or not np.isfinite(value).all():
+            raise ValueError(f"key {key!r}: the {targets[0]} must be 3 finite numbers (mm)")
+        if mask[frame, landmark]:
+            raise ValueError(f"landmark {landmark} at frame {frame} is constrained twice (or is the neutral face)")
+        if targets[0] == "displacement" and neutral is None:
+            raise ValueError(f"key {key!r}: a displacement is taken from the neutral face: give one")
+        given[frame, landmark] = value + (neutral[landmark] if targets[0] == "displacement" else 0.0)
+        mask[frame, landmark] = True
+    return given, mask
+
+
+def read_constraints(path):
+    """(keys, neutral (68, 3) or None) from a constraints JSON file (schema in the module docstring)."""
+    try:
+        spec = json.loads(Path(path).read_text())
+    except json.JSONDecodeError as e:
+        raise ValueError(f"{path} is not valid JSON: {e}") from None
+    if not isinstance(spec, dict) or "keys" not in spec or set(spec) - {"keys", "neutral"}:
+        raise ValueError(f"{path}: expected an object with 'keys' (a list) and optionally 'neutral' (68 x 3)")
+    neutral = spec.get("neutral")
+    return spec["keys"], None if neutral is None else check_neutral(neutral)
+
+
+def check_neutral(neutral):
+    """A neutral face's landmarks as a finite (68, 3) array (a clear error otherwise)."""
+    x = np.asarray(neutral, dtype=np.float64)
+    if x.shape != (68, 3) or not np.isfinite(x).all():
+        raise ValueError(f"the neutral face must be 68 x 3 finite landmark coordinates (mm), got shape {x.shape}")
+    return x
+
+
+def keyframes(keys, n=4, neutral=None, settings=Keyframes(), denoiser=None, progress=True, **overrides):
+    """n sequences (n, F, 68, 3) float32 in mm that meet landmark keyframes (:func:`check_keys`), generated
+    around them by the unconditional DDPM.  ``settings``: :class:`facelib.config.Keyframes` (the method)."""
+    settings, shape = task_settings(settings, overrides, n)
+    neutral = None if neutral is None else check_neutral(neutral)
+    given, mask = check_keys(keys, shape[1], neutral)
+    denoiser = denoiser or load_denoiser(f"denoiser_{settings.dataset}")
+    diffusion = denoiser.diffusion_with(settings.steps, settings.variance, settings.ddim_eta)
+    x0 = denoiser.to_model(np.broadcast_to(given, shape))
+    known = torch.as_tensor(np.broadcast_to(mask, shape[:3]).copy()).to(denoiser.device)
+    guide = None
+    if settings.method in ("reconstruction", "both"):
+        guide = ReconstructionGuidance(denoiser.model, diffusion, x0, known, settings.reconstruction_scale)
+    if settings.method in ("replace", "both"):
+        guide = KnownFrames(diffusion, x0, known, known_noise(settings.seed), inner=guide)
+        x_T = guide.start(torch.Generator().manual_seed(settings.seed))
+        out = diffusion.run(denoiser.model, x_T, settings.seed, diffusion.schedule(), guide, None, progress)
+    else:
+        out = diffusion.sample(denoiser.model, shape, seed=settings.seed, guide=guide, progress=progress)
+    return denoiser.to_mm(out)
+
+
+def key_errors(sequences, keys, neutral=None):
+    """Distance (mm) of each keyed landmark from its target, (n, number of keys), for sequences (n, F, 68, 3)."""
+    x = np.asarray(sequences, dtype=np.float64)
+    given, mask = check_keys(keys, x.shape[1], None if neutral is None else check_neutral(neutral))
+    if neutral is not None:
+        mask[0] = False  # the neutral frame is given, not a key
+    frames, landmarks = np.nonzero(mask)
+    return np.linalg.norm(x[:, frames, landmarks] - given[frames, landmarks], axis=-1)

@@ -1,0 +1,63 @@
+"""Landmark keyframes (the fine-control chapter): the constraints, their file, the task."""
+import json
+
+import numpy as np
+import pytest
+
+from facelib import tasks
+
+NEUTRAL = np.random.default_rng(0).normal(0, 30, (68, 3))
+
+
+def test_keys_become_targets_and_a_mask_with_the_neutral_face_as_frame_zero():
+    keys = [{"frame": 25, "landmark": 54, "displacement": [0, 8, 0]},
+            {"frame": 10, "landmark": 8, "position": [1.0, 2.0, 3.0]}]
+    given, mask = tasks.check_keys(keys, 40, NEUTRAL)
+    assert mask.sum() == 68 + 2 and mask[0].all() and mask[25, 54] and mask[10, 8]
+    assert np.allclose(given[25, 54], NEUTRAL[54] + [0, 8, 0]) and np.allclose(given[10, 8], [1, 2, 3])
+    assert np.allclose(given[0], NEUTRAL)
+
+
+@pytest.mark.parametrize("keys, message", [
+    ([], "non-empty list"),
+    ([{"frame": 3, "landmark": 54}], "one of 'position' or 'displacement'"),
+    ([{"frame": 3, "landmark": 54, "position": [0, 0, 0], "displacement": [0, 0, 0]}], "one of"),
+    ([{"frame": 40, "landmark": 54, "position": [0, 0, 0]}], r"integer in 0..39"),
+    ([{"frame": 3, "landmark": 68, "position": [0, 0, 0]}], r"iBUG-68 index in 0..67"),
+    ([{"frame": 3, "landmark": 5, "position": [0, 0]}], "3 finite numbers"),
+    ([{"frame": 3, "landmark": 5, "position": [0, 0, np.nan]}], "3 finite numbers"),
+    ([{"frame": 3, "landmark": 5, "position": [0, 0, 0]}] * 2, "constrained twice"),
+])
+def test_bad_keys_are_refused_naming_what_is_allowed(keys, message):
+    with pytest.raises(ValueError, match=message):
+        tasks.check_keys(keys, 40, NEUTRAL)
+
+
+def test_a_displacement_needs_a_face_and_a_constraints_file_must_be_valid(tmp_path):
+    with pytest.raises(ValueError, match="displacement is taken from the neutral face"):
+        tasks.check_keys([{"frame": 3, "landmark": 5, "displacement": [0, 1, 0]}], 40)
+    bad = tmp_path / "bad.json"
+    bad.write_text("{keys: [")
+    with pytest.raises(ValueError, match="not valid JSON"):
+        tasks.read_constraints(bad)
+    bad.write_text(json.dumps({"keyz": []}))
+    with pytest.raises(ValueError, match="'keys'"):
+        tasks.read_constraints(bad)
+    good = tmp_path / "keys.json"
+    good.write_text(json.dumps({"neutral": NEUTRAL.tolist(), "keys": [{"frame": 3, "landmark": 5,
+                                                                       "displacement": [0, 1, 0]}]}))
+    keys, neutral = tasks.read_constraints(good)
+    assert np.allclose(neutral, NEUTRAL) and keys[0]["landmark"] == 5
+
+
+@pytest.mark.parametrize("method", ["replace", "reconstruction", "both"])
+def test_keyframes_meet_their_keys(method, denoiser, coma_test):
+    neutral = coma_test.neutral_landmarks(int(coma_test.subjects[0]))
+    keys = [{"frame": 20, "landmark": 57, "displacement": [0.0, -10.0, 0.0]}]  # the lower lip 10 mm down
+    x = tasks.keyframes(keys, 2, neutral, steps=10, method=method, denoiser=denoiser, progress=False)
+    assert x.shape == (2, 40, 68, 3) and np.isfinite(x).all()
+    errors = tasks.key_errors(x, keys, neutral)
+    plain = tasks.unconditional(2, steps=10, denoiser=denoiser, progress=False)
+    assert errors.mean() < tasks.key_errors(plain, keys, neutral).mean()
+    if method != "reconstruction":  # replacement: the keyed coordinates and the face are given exactly
+        assert errors.max() < 1e-3 and np.abs(x[:, 0] - neutral).max() < 1e-3
