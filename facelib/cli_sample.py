@@ -18,7 +18,13 @@ SETTINGS = config.SAMPLING | {"decoder": config.DecoderThenDiffusion()}
 EDIT = ("edit --input seq.npz --label X --out edited.npz: each sequence is inverted by DDIM (eta = 0) to the x_T "
         "the chain regenerates it from, then regenerated from there with label guidance towards X: its identity "
         "and timing are kept, its expression changes (not in the paper)")
-GUIDES = {"label": "guide_{}_I", "edit": "guide_{}_I", "text": "guide_{}_text", "decoder": "motionclip_{}", "geometry": "guide_{}_S"}
+BEYOND = {"au": "AU-curve control: action units that follow requested intensity curves (not in the paper)",
+          "keyframes": "chosen landmarks at chosen frames, a natural sequence around them (not in the paper)"}
+KEYFRAMES = ("keyframes --constraints keys.json --out out.npz: sequences that meet landmark keyframes. keys.json: "
+             '{"neutral": [[x, y, z], ... 68 rows] (optional, mm; frame 0 is then that face), "keys": [{"frame": 25, '
+             '"landmark": 54, "displacement": [0, 8, 0]}, {"frame": 10, "landmark": 8, "position": [x, y, z]}]}: '
+             "frames from 0, iBUG-68 landmark indices, positions in mm, displacements in mm from the neutral face")
+GUIDES = {"au": "au_regressor_{}", "label": "guide_{}_I", "edit": "guide_{}_I", "text": "guide_{}_text", "decoder": "motionclip_{}", "geometry": "guide_{}_S"}
 
 
 def _default(task, field):
@@ -66,6 +72,25 @@ def add_parsers(sub):
                 choices=list(config.SAMPLERS))
         _option(t[task], task, "eta", "DDIM's noise, in [0, 1] (0: deterministic)", type=float)
         t[task].set_defaults(func=run)
+    beyond = argparse.ArgumentParser(add_help=False, parents=[io])
+    beyond.add_argument("--n", type=int, default=16, help="number of sequences (default 16)")
+    for task, description in BEYOND.items():
+        t[task] = parsers.add_parser(task, parents=[beyond], help=description,
+                                     description=KEYFRAMES if task == "keyframes" else description)
+        t[task].set_defaults(func=run, paper=False)
+        for field, text, kind in (("steps", "reverse steps, respaced from T = 2000", int),
+                                  ("seed", "the random seed", int)):
+            _option(t[task], task, field, text, type=kind)
+    t["au"].add_argument("--curve", action="append", required=True, help="an AU curve NAME:value@frame,... (frames "
+                         "from 0, linear between keys) or NAME:value (constant), e.g. AU12:0@0,0.8@20,0@39 --curve "
+                         "AU26:0; NAME is an AU of the world (AU1 ... AU45) or AU12 (both lip corners); repeat it")
+    _option(t["au"], "au", "method", "adagrad (Alg. 1's steps) or mean_shift", choices=list(config.GUIDANCE_METHODS))
+    _option(t["au"], "au", "lr", "Adagrad learning rate (None: the book's choice for the steps)", type=float)
+    _option(t["au"], "au", "tolerance", "tau of log N(curve | R(x_t, t), tau^2), in intensity units", type=float)
+    t["keyframes"].add_argument("--constraints", required=True, help="the keyframes, a JSON file (see above)")
+    _option(t["keyframes"], "keyframes", "method", "replace (Alg. 3 on coordinates), reconstruction (guidance) or "
+            "both", choices=list(config.KEYFRAME_METHODS))
+    _option(t["keyframes"], "keyframes", "reconstruction_scale", "reconstruction guidance zeta", type=float)
     t["edit"] = edit = sub.add_parser("edit", parents=[io], help="change the expression of a given sequence: DDIM "
                                       "inversion, then label control (not in the paper)", description=EDIT)
     edit.set_defaults(func=run, task="edit", paper=False)
@@ -173,6 +198,11 @@ def run(args):
         settings = replace(settings, num_frames=given.shape[1])
         landmarks = tasks.edit(given, args.label, args.keep, settings, denoiser)
         extra["labels"] = [args.label] * len(landmarks)
+    elif args.task == "au":
+        landmarks, extra["curves"] = tasks.au_control(args.curve, n, settings, denoiser), args.curve
+    elif args.task == "keyframes":
+        keys, neutral = tasks.read_constraints(args.constraints)
+        landmarks = tasks.keyframes(keys, n, neutral, settings, denoiser)
     elif args.task == "fill":
         given = read_npz_array(args.input, ["landmarks"], "the sequence to fill")
         if given.ndim not in (3, 4) or given.shape[-2:] != (68, 3):
@@ -189,7 +219,8 @@ def run(args):
             "adagrad_steps": config.ADAGRAD_STEPS, **asdict(settings),
             **({"scale": settings.guidance_scale} if hasattr(settings, "guidance_scale") else {}),
             **({"method": settings.guidance_method} if hasattr(settings, "guidance_method") else {}),
-            **{k: getattr(args, k) for k in ("label", "text", "input", "known", "neutral", "keep") if hasattr(args, k)}}
+            **{k: getattr(args, k) for k in ("label", "text", "input", "known", "neutral", "keep", "curve", "constraints")
+               if hasattr(args, k)}}
     np.savez(args.out, landmarks=landmarks.astype(np.float32), config=json.dumps(used),
              **{k: np.asarray(v) for k, v in extra.items()})
     print(f"wrote {args.out}: landmarks {landmarks.shape} float32 (mm); config {used}")

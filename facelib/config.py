@@ -669,7 +669,7 @@ class GeometryAdaptive(Sampling):
 
 
 SAMPLING = {"unconditional": Unconditional(), "label": LabelControl(), "text": TextControl(), "fill": Fill(),
-            "geometry": GeometryAdaptive(), "edit": Edit()}
+            "geometry": GeometryAdaptive(), "edit": Edit(), "au": AUControl(), "keyframes": Keyframes()}
 
 
 def with_overrides(settings, overrides):

@@ -208,3 +208,22 @@ def test_cli_classifier_free_label_control_and_edit(tmp_path, coma_test, capsys)
         with pytest.raises(SystemExit):
             main(["edit", "--input", str(seq), "--label", "mouth_open", "--steps", "4", "--out", str(out), *args])
         assert message in capsys.readouterr().err and not out.exists()
+
+
+def test_cli_keyframes_and_au_curves(tmp_path, coma_test, capsys):
+    neutral = coma_test.subject_neutrals()[0]
+    keys = tmp_path / "keys.json"
+    keys.write_text(json.dumps({"neutral": neutral.tolist(),
+                                "keys": [{"frame": 20, "landmark": 57, "displacement": [0, -10, 0]}]}))
+    arrays, used = sample(tmp_path / "keys.npz", "keyframes", "--constraints", str(keys), "--n", "2", "--steps", "4")
+    assert arrays["landmarks"].shape == (2, 40, 68, 3) and used["method"] == "both"
+    assert np.allclose(arrays["landmarks"][:, 20, 57], neutral[57] + [0, -10, 0], atol=1e-3)
+    out = tmp_path / "bad.npz"
+    keys.write_text(json.dumps({"keys": [{"frame": 40, "landmark": 57, "position": [0, 0, 0]}]}))
+    with pytest.raises(SystemExit):
+        main(["sample", "keyframes", "--constraints", str(keys), "--out", str(out)])
+    assert "integer in 0..39" in capsys.readouterr().err and not out.exists()  # nothing written on failure
+    if config.WORLD == 1:  # world 1 ships no AU regressor: the error names the command that trains one
+        with pytest.raises(SystemExit):
+            main(["sample", "au", "--curve", "AU12:0@0,0.8@20", "--out", str(out)])
+        assert "au_regressor_coma not found" in capsys.readouterr().err and not out.exists()
