@@ -24,7 +24,8 @@ KEYFRAMES = ("keyframes --constraints keys.json --out out.npz: sequences that me
              '{"neutral": [[x, y, z], ... 68 rows] (optional, mm; frame 0 is then that face), "keys": [{"frame": 25, '
              '"landmark": 54, "displacement": [0, 8, 0]}, {"frame": 10, "landmark": 8, "position": [x, y, z]}]}: '
              "frames from 0, iBUG-68 landmark indices, positions in mm, displacements in mm from the neutral face")
-GUIDES = {"au": "au_regressor_{}", "label": "guide_{}_I", "edit": "guide_{}_I", "text": "guide_{}_text", "decoder": "motionclip_{}", "geometry": "guide_{}_S"}
+GUIDES = {"au": "au_regressor_{}", "label": "guide_{}_I", "edit": "guide_{}_I", "text": "guide_{}_text",
+          "decoder": "motionclip_{}", "geometry": "guide_{}_S"}
 
 
 def _default(task, field):
@@ -219,8 +220,8 @@ def run(args):
             "adagrad_steps": config.ADAGRAD_STEPS, **asdict(settings),
             **({"scale": settings.guidance_scale} if hasattr(settings, "guidance_scale") else {}),
             **({"method": settings.guidance_method} if hasattr(settings, "guidance_method") else {}),
-            **{k: getattr(args, k) for k in ("label", "text", "input", "known", "neutral", "keep", "curve", "constraints")
-               if hasattr(args, k)}}
+            **{k: getattr(args, k) for k in ("label", "text", "input", "known", "neutral", "keep", "curve",
+                                             "constraints") if hasattr(args, k)}}
     np.savez(args.out, landmarks=landmarks.astype(np.float32), config=json.dumps(used),
              **{k: np.asarray(v) for k, v in extra.items()})
     print(f"wrote {args.out}: landmarks {landmarks.shape} float32 (mm); config {used}")

@@ -555,7 +555,7 @@ class TextControl(Sampling):
 
 
 AU_CURVE_TOLERANCE = 0.1  # tau of AU-curve control: log N(c | R(x_t, t), tau^2), in AU intensity units (our choice)
-AU_CURVE_LR = 0.03  # the Adagrad rate of AU-curve control at AU_CURVE_STEPS steps (our choice; the fine-control chapter)
+AU_CURVE_LR = 0.03  # the Adagrad rate of AU-curve control at 50 steps (our choice; the fine-control chapter)
 
 
 @dataclass(frozen=True)

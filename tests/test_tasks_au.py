@@ -86,3 +86,16 @@ def test_the_regressor_recipe_trains_and_its_checkpoint_loads_as_a_guide(tmp_pat
     assert out.shape == (2, 40, len(AU_NAMES)) and torch.isfinite(out).all()
     with pytest.raises(ValueError, match="trained on 'coma', not 'bu'"):
         tasks.load_au_regressor("bu", name=stem)
+
+
+def test_random_requests_stay_in_the_data_and_fitted_requests_score_zero():
+    requests = tasks.random_requests(6, seed=1)
+    ranges = tasks.data_ranges("coma")
+    for request in requests:  # each parses against the data's ranges
+        curves, mask = tasks.requested_curves(request, 40, ranges)
+        assert mask.any() and curves[0][mask[0]].max() == 0.0
+    exact = np.stack([tasks.requested_curves(r, 40)[0] for r in requests])
+    assert np.allclose(tasks.curve_errors(exact, requests), 0.0)
+    assert tasks.curve_errors(exact + 0.1, requests) == pytest.approx([0.1] * 6)
+    pairs = tasks.never_together("coma")
+    assert pairs and all(a in AU_NAMES and b in AU_NAMES for a, b in pairs)

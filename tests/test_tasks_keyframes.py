@@ -61,3 +61,11 @@ def test_keyframes_meet_their_keys(method, denoiser, coma_test):
     assert errors.mean() < tasks.key_errors(plain, keys, neutral).mean()
     if method != "reconstruction":  # replacement: the keyed coordinates and the face are given exactly
         assert errors.max() < 1e-3 and np.abs(x[:, 0] - neutral).max() < 1e-3
+
+
+def test_random_keys_are_real_displacements_and_key_speeds_read_the_keyed_frame():
+    (keys, neutral), = tasks.random_keys(1, seed=3)
+    tasks.check_keys(keys, 40, neutral)  # valid against their own face
+    x = np.zeros((1, 40, 68, 3))
+    x[0, keys[0]["frame"]:] += 4.0  # a jump of 4 mm at the keyed frame
+    assert tasks.key_speeds(x, keys)[0, 0] == pytest.approx(4.0 * np.sqrt(3))

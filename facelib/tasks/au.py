@@ -103,3 +103,52 @@ def au_control(curves, n=16, settings=AUControl(), denoiser=None, regressor=None
         hook = MeanShiftGuidance(score, diffusion, settings.scale)
     x = diffusion.sample(denoiser.model, shape, seed=settings.seed, guide=hook, progress=progress)
     return denoiser.to_mm(x)
+
+
+def fitted_curves(sequences, faces=None):
+    """The AU curves (n, F, A) that the world's rig needs to reproduce each sequence (n, F, 68, 3) in mm: the
+    known face closest to its neutral end (:func:`facelib.rig_fit.closest_face`), then Gauss-Newton per frame
+    (:func:`facelib.rig_fit.fit_aus`).  How AU-curve control is scored: the curves the result shows, read by
+    the rig that made the data, against the curves requested."""
+    from .. import rig_fit
+
+    faces = faces or rig_fit.known_faces()
+    return np.stack([rig_fit.fit_aus(rig_fit.closest_face(s, faces), s) for s in np.asarray(sequences)])
+
+
+def curve_errors(fitted, requests, num_frames=40):
+    """Mean absolute error (intensity units) per sequence between fitted curves (n, F, A) and the requests
+    (one list of specs per sequence), over the constrained frames and AUs only."""
+    out = []
+    for w, request in zip(fitted, requests):
+        curves, mask = requested_curves(request, num_frames)
+        out.append(float(np.abs(w - curves)[mask].mean()))
+    return np.array(out)
+
+
+def never_together(dataset="coma", active=0.2):
+    """The pairs of AUs (names) that no training sequence of ``dataset`` activates together (both above
+    ``active`` at some frame of the same sequence), among the AUs the data activate at all."""
+    w = data.load_dataset(dataset, "train").au_weights
+    on = (np.abs(w) > active).any(1)  # (n, A): the AUs each sequence activates
+    used = np.flatnonzero(on.any(0))
+    return [(AU_NAMES[a], AU_NAMES[b]) for i, a in enumerate(used) for b in used[i + 1:]
+            if not (on[:, a] & on[:, b]).any()]
+
+
+def random_requests(n, seed=0, dataset="coma", aus=None, pairs=None, low=0.3):
+    """n random requests within the data's range: one AU (of ``aus``; default, every AU the data push to at
+    least 0.5) or one pair of ``pairs``, each a curve from 0 at frame 0 up to a peak in [low, the data's
+    highest, at most 1] at a frame in 10..25, then to a value between 0 and the peak at frame 39."""
+    rng = np.random.default_rng(seed)
+    ranges = data_ranges(dataset)
+    aus = aus or [a for a in AU_NAMES if ranges[a][1] >= 0.5 and a != "AU45"]
+    requests = []
+    for _ in range(n):
+        chosen = pairs[rng.integers(len(pairs))] if pairs else (aus[rng.integers(len(aus))],)
+        request = []
+        for a in chosen:
+            peak = rng.uniform(low, min(1.0, ranges[a][1]))
+            request.append(f"{a}:0@0,{peak:.2f}@{rng.integers(10, 26)},{rng.uniform(0, peak):.2f}@39")
+        requests.append(request)
+    return requests

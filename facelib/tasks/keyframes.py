@@ -112,3 +112,35 @@ def key_errors(sequences, keys, neutral=None):
         mask[0] = False  # the neutral frame is given, not a key
     frames, landmarks = np.nonzero(mask)
     return np.linalg.norm(x[:, frames, landmarks] - given[frames, landmarks], axis=-1)
+
+
+MOBILE_LANDMARKS = (8, 19, 24, 48, 54, 57)  # chin, brows, mouth corners, lower lip: what expressions move most
+
+
+def random_keys(n, seed=0, dataset="coma", landmarks=MOBILE_LANDMARKS):
+    """n random requests [(keys, neutral (68, 3))] that real motion can meet: for a random test sequence of
+    ``dataset`` (an N2E one), its subject's neutral face and one key, the displacement of one of ``landmarks``
+    at a frame in 10..35 of that sequence."""
+    from .. import data
+
+    test = data.load_dataset(dataset, "test")
+    n2e = np.flatnonzero(test.kinds == 0)
+    rng = np.random.default_rng(seed)
+    requests = []
+    for i in rng.choice(n2e, n, replace=len(n2e) < n):
+        neutral = test.neutral_landmarks(int(test.subjects[i]))
+        frame, landmark = int(rng.integers(10, 36)), int(rng.choice(landmarks))
+        shift = test.landmarks[i, frame, landmark].astype(np.float64) - neutral[landmark]
+        requests.append(([{"frame": frame, "landmark": landmark, "displacement": shift.round(2).tolist()}], neutral))
+    return requests
+
+
+def key_speeds(sequences, keys):
+    """The frame-to-frame motion (mm/frame, :func:`facelib.metrics.frame_speeds`) into and out of each keyed
+    frame, the larger of the two, (n, number of keys): a key met by a jump shows here."""
+    from .. import metrics
+
+    speeds = metrics.frame_speeds(sequences)  # (n, F - 1)
+    frames = np.array([k["frame"] for k in keys])
+    into, out = speeds[:, np.clip(frames - 1, 0, None)], speeds[:, np.clip(frames, None, speeds.shape[1] - 1)]
+    return np.maximum(into, out)
