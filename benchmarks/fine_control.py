@@ -1,0 +1,114 @@
+"""Fine control (the fine-control chapter, not in the paper): AU-intensity curves and landmark keyframes.
+
+Usage:
+    python benchmarks/fine_control.py --experiment au [--n 32] [--steps 50] [--save NAME]
+    python benchmarks/fine_control.py --experiment keyframes [--n 32] [--steps 100] [--save NAME]
+
+``au``: ``--n`` random requests of one AU within the data's range (tasks.random_requests), and ``--n`` of an AU
+pair that no training sequence activates together (tasks.never_together), each generated once by AU-curve
+control; the rig of the world is fitted back to every result (tasks.fitted_curves) and the mean absolute error
+(intensity units) to the requested curve is taken over the constrained frames and AUs.  Beside it the FID of
+the results (the type-I IC of coma) and the unconditional samples' FID on the same number of sequences.
+
+``keyframes``: ``--n`` random keys (tasks.random_keys: the displacement of a mobile landmark at a frame of a
+real test sequence, from its subject's neutral face), met by each method (replace, reconstruction, both);
+the constraint error (mm), the share of requests within 0.5 mm whose motion into and out of the keyed frame
+stays within the 95th percentile of the test data's frame-to-frame motion, and the FID against the
+unconstrained samples'.  Every mean with its 95 % bootstrap interval.
+
+    python benchmarks/fine_control.py --experiment au --save fine_control_au
+    python benchmarks/fine_control.py --experiment keyframes --save fine_control_keyframes
+"""
+import argparse
+import time
+
+import numpy as np
+
+from facelib import config, data, evaluation, metrics, results, tasks
+
+COLUMNS = {
+    "au": ["requests", "method", "n", "MAE (intensity)", "MAE 95 % interval", "share with MAE <= 0.1 (%)", "FID",
+           "FID 95 % interval", "s per sequence"],
+    "keyframes": ["method", "n", "constraint error (mm)", "error 95 % interval", "met (%)", "FID",
+                  "FID 95 % interval", "s per sequence"],
+}
+
+
+def fid_with_interval(evaluator, x):
+    """FID of sequences against the training split (the IC's logits), with its 95 % bootstrap interval."""
+    f = evaluator.features(x)
+    statistic = lambda g: metrics.frechet_distance(g, evaluator.reference_features)  # noqa: E731
+    return statistic(f), [float(v) for v in metrics.bootstrap_interval(statistic, f, num_resamples=200)]
+
+
+def au_rows(args, evaluator):
+    pairs = [p for p in tasks.never_together("coma")
+             if min(tasks.data_ranges("coma")[a][1] for a in p) >= 0.5]
+    requests = {"one AU": tasks.random_requests(args.n, seed=1),
+                "an AU pair never active together": tasks.random_requests(args.n, seed=2, pairs=pairs)}
+    rows = []
+    t0 = time.perf_counter()
+    plain = tasks.unconditional(args.n, steps=args.steps, seed=3, progress=False)
+    fid, fid_ci = fid_with_interval(evaluator, plain)
+    rows.append(["(none)", "unconditional", args.n, "", "", "", fid, fid_ci, (time.perf_counter() - t0) / args.n])
+    for name, request in requests.items():
+        for method in config.GUIDANCE_METHODS:
+            t0 = time.perf_counter()
+            x = tasks.au_control(request, args.n, steps=args.steps, method=method, seed=3, progress=False)
+            seconds = (time.perf_counter() - t0) / args.n
+            errors = tasks.curve_errors(tasks.fitted_curves(x), request)
+            fid, fid_ci = fid_with_interval(evaluator, x)
+            rows.append([name, method, args.n, float(errors.mean()),
+                         [float(v) for v in metrics.bootstrap_interval(np.mean, errors)],
+                         float(100 * (errors <= 0.1).mean()), fid, fid_ci, seconds])
+            print(rows[-1], flush=True)
+    return rows, ["denoiser_coma", "au_regressor_coma", "ic_coma_I"]
+
+
+def keyframe_rows(args, evaluator):
+    requests = tasks.random_keys(args.n, seed=4)
+    real_p95 = float(np.percentile(metrics.frame_speeds(data.load_dataset("coma", "test").landmarks), 95))
+    t0 = time.perf_counter()
+    plain = tasks.unconditional(args.n, steps=args.steps, seed=5, progress=False)
+    fid, fid_ci = fid_with_interval(evaluator, plain)
+    rows = [["unconstrained", args.n, "", "", "", fid, fid_ci, (time.perf_counter() - t0) / args.n]]
+    for method in config.KEYFRAME_METHODS:
+        t0 = time.perf_counter()
+        x = np.concatenate([tasks.keyframes(keys, 1, neutral, steps=args.steps, method=method, seed=5 + k,
+                                            progress=False) for k, (keys, neutral) in enumerate(requests)])
+        seconds = (time.perf_counter() - t0) / args.n
+        errors = np.array([tasks.key_errors(x[k:k + 1], keys, neutral).max() for k, (keys, neutral)
+                           in enumerate(requests)])
+        speeds = np.array([tasks.key_speeds(x[k:k + 1], keys).max() for k, (keys, _) in enumerate(requests)])
+        fid, fid_ci = fid_with_interval(evaluator, x)
+        interval = [float(v) for v in metrics.bootstrap_interval(np.mean, errors)]
+        met = float(100 * ((errors <= 0.5) & (speeds <= real_p95)).mean())
+        rows.append([method, args.n, float(errors.mean()), interval, met, fid, fid_ci, seconds])
+        print(rows[-1], flush=True)
+    return rows, ["denoiser_coma", "ic_coma_I"]
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--experiment", choices=list(COLUMNS), required=True)
+    parser.add_argument("--n", type=int, default=32, help="requests per row (default 32)")
+    parser.add_argument("--steps", type=int, default=None, help="reverse steps (default: the task's, config)")
+    parser.add_argument("--save", metavar="NAME", help="store the table in results/NAME.json")
+    args = parser.parse_args()
+    default = {"au": config.AUControl(), "keyframes": config.Keyframes()}[args.experiment]
+    args.steps = args.steps or default.steps
+    t_start = time.perf_counter()
+    evaluator = evaluation.load_evaluator("coma", "I")
+    rows, checkpoints = (au_rows if args.experiment == "au" else keyframe_rows)(args, evaluator)
+    if args.save:
+        title = {"au": "AU-curve control: requested against fitted curves",
+                 "keyframes": "Landmark keyframes: constraint error, smoothness, realism"}[args.experiment]
+        results.save_result(args.save, title, COLUMNS[args.experiment], rows,
+                            results.Run(checkpoints=checkpoints, seeds=[1, 2, 3, 4, 5], n=args.n, steps=[args.steps],
+                                        wall_time_s=time.perf_counter() - t_start),
+                            notes="FID against the training split with the type-I IC of coma; intervals by "
+                                  "bootstrap over the requests")
+
+
+if __name__ == "__main__":
+    main()
