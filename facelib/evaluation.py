@@ -143,3 +143,17 @@ def accuracy_by_noise(classifier, denoiser, dataset, t_grid, classifier_type="I"
         predicted = classifier(xt, torch.full((len(x0),), float(t))).argmax(1)
         accuracies.append(100 * (predicted == y).float().mean().item())
     return accuracies
+
+
+@torch.no_grad()
+def au_error_by_noise(regressor, denoiser, dataset, t_grid, seed=0):
+    """Mean absolute error (intensity units) of a noisy AU regressor R(x_t, t) (AU-curve control) on
+    ``dataset``'s sequences noised to each step of ``t_grid`` with Eq. 3, against the AU curves that made
+    them, over every frame and AU; one fresh draw of noise per sequence and step."""
+    x0 = torch.as_tensor(denoiser.normalizer.normalize(dataset.landmarks))
+    truth = torch.as_tensor(dataset.au_weights, dtype=torch.float32)
+    generator, errors = torch.Generator().manual_seed(seed), []
+    for t in t_grid:
+        xt = denoiser.diffusion.q_sample(x0, torch.full((len(x0),), t), generator=generator)
+        errors.append((regressor(xt, torch.full((len(x0),), float(t))) - truth).abs().mean().item())
+    return errors

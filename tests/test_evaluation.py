@@ -1,6 +1,7 @@
 """The evaluation protocol of §5: FID, diversity, multimodality, classifier types, the shipped ICs."""
 import numpy as np
 import pytest
+import torch
 
 from facelib import data, evaluation, metrics
 
@@ -124,3 +125,14 @@ def test_a_guide_reads_clean_sequences_well_and_pure_noise_at_chance():
     accuracy = evaluation.accuracy_by_noise(tasks.load_guide("coma").model, tasks.load_denoiser("denoiser_coma"),
                                             test, [0, 2000])
     assert accuracy[0] > 50 > 2 * 100 / 12 > accuracy[1]
+
+
+def test_au_error_by_noise_is_zero_for_a_regressor_that_knows_the_answer(denoiser):
+    test = data.load_dataset("coma", "test").subset(np.arange(4))
+    truth = torch.as_tensor(test.au_weights, dtype=torch.float32)
+
+    class Oracle(torch.nn.Module):
+        def forward(self, xt, t):
+            return truth + 0.25 * (t > 0).float()[:, None, None]  # exact on clean input, 0.25 off on noise
+
+    assert evaluation.au_error_by_noise(Oracle(), denoiser, test, [0, 500]) == pytest.approx([0.0, 0.25])
