@@ -67,5 +67,10 @@ def test_random_keys_are_real_displacements_and_key_speeds_read_the_keyed_frame(
     (keys, neutral), = tasks.random_keys(1, seed=3)
     tasks.check_keys(keys, 40, neutral)  # valid against their own face
     x = np.zeros((1, 40, 68, 3))
-    x[0, keys[0]["frame"]:] += 4.0  # a jump of 4 mm at the keyed frame
+    x[0, keys[0]["frame"]:, keys[0]["landmark"]] += 4.0  # the keyed landmark jumps at the keyed frame
     assert tasks.key_speeds(x, keys)[0, 0] == pytest.approx(4.0 * np.sqrt(3))
+    x[0, keys[0]["frame"]:, keys[0]["landmark"] + 1] += 40.0  # another landmark's jump does not count
+    assert tasks.key_speeds(x, keys)[0, 0] == pytest.approx(4.0 * np.sqrt(3))
+    walk = np.zeros((2, 40, 68, 3))
+    walk[:, :, 5, 0] = np.arange(40) * 0.5  # 0.5 mm per frame
+    assert tasks.real_speed_p95(walk, 5) == pytest.approx(0.5)
