@@ -52,13 +52,14 @@ def au_rows(args, evaluator):
     fid, fid_ci = fid_with_interval(evaluator, plain)
     rows.append(["(none)", "unconditional", args.n, "", "", "", fid, fid_ci, (time.perf_counter() - t0) / args.n])
     for name, request in requests.items():
-        for method in config.GUIDANCE_METHODS:
+        for method, lr in [("adagrad", lr) for lr in args.lr] + [("mean_shift", None)]:
             t0 = time.perf_counter()
-            x = tasks.au_control(request, args.n, steps=args.steps, method=method, seed=3, progress=False)
+            x = tasks.au_control(request, args.n, steps=args.steps, method=method, lr=lr, seed=3, progress=False)
             seconds = (time.perf_counter() - t0) / args.n
             errors = tasks.curve_errors(tasks.fitted_curves(x), request)
             fid, fid_ci = fid_with_interval(evaluator, x)
-            rows.append([name, method, args.n, float(errors.mean()),
+            label = method if lr is None else f"{method}, lr {lr:g}"
+            rows.append([name, label, args.n, float(errors.mean()),
                          [float(v) for v in metrics.bootstrap_interval(np.mean, errors)],
                          float(100 * (errors <= 0.1).mean()), fid, fid_ci, seconds])
             print(rows[-1], flush=True)
@@ -95,6 +96,8 @@ def main():
     parser.add_argument("--experiment", choices=list(COLUMNS), required=True)
     parser.add_argument("--n", type=int, default=32, help="requests per row (default 32)")
     parser.add_argument("--steps", type=int, default=None, help="reverse steps (default: the task's, config)")
+    parser.add_argument("--lr", type=float, nargs="+", default=[None],
+                        help="au: Adagrad rates to compare (default: the book's, config.AU_CURVE_LR, step-scaled)")
     parser.add_argument("--save", metavar="NAME", help="store the table in results/NAME.json")
     args = parser.parse_args()
     default = {"au": config.AUControl(), "keyframes": config.Keyframes()}[args.experiment]
