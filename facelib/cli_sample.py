@@ -85,7 +85,12 @@ def add_parsers(sub):
     t["au"].add_argument("--curve", action="append", required=True, help="an AU curve NAME:value@frame,... (frames "
                          "from 0, linear between keys) or NAME:value (constant), e.g. AU12:0@0,0.8@20,0@39 --curve "
                          "AU26:0; NAME is an AU of the world (AU1 ... AU45) or AU12 (both lip corners); repeat it")
+    t["au"].add_argument("--neutral", default=None, help=".npz with the neutral landmarks (68, 3) in mm of the face "
+                         "to animate (key 'neutral' or 'landmarks'), which is then frame 0 (default: the model draws "
+                         "the face too)")
     _option(t["au"], "au", "method", "adagrad (Alg. 1's steps) or mean_shift", choices=list(config.GUIDANCE_METHODS))
+    _option(t["au"], "au", "read", "what the AU regressor reads: x0_hat, the denoiser's estimate, or x_t",
+            choices=list(config.HEAD_INPUTS))
     _option(t["au"], "au", "lr", "Adagrad learning rate (None: the book's choice for the steps)", type=float)
     _option(t["au"], "au", "tolerance", "tau of log N(curve | R(x_t, t), tau^2), in intensity units", type=float)
     t["keyframes"].add_argument("--constraints", required=True, help="the keyframes, a JSON file (see above)")
@@ -200,7 +205,10 @@ def run(args):
         landmarks = tasks.edit(given, args.label, args.keep, settings, denoiser)
         extra["labels"] = [args.label] * len(landmarks)
     elif args.task == "au":
-        landmarks, extra["curves"] = tasks.au_control(args.curve, n, settings, denoiser), args.curve
+        neutral = None if args.neutral is None else read_npz_array(args.neutral, ["neutral", "landmarks"],
+                                                                    "the neutral landmarks")
+        landmarks = tasks.au_control(args.curve, n, neutral, settings, denoiser)
+        extra["curves"] = args.curve
     elif args.task == "keyframes":
         keys, neutral = tasks.read_constraints(args.constraints)
         landmarks = tasks.keyframes(keys, n, neutral, settings, denoiser)

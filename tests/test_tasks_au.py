@@ -72,6 +72,12 @@ def test_au_control_samples_and_guidance_moves_the_regressor_towards_the_request
         tasks.au_control([request, request], 3, **kwargs)
     with pytest.raises(ValueError, match="method"):
         tasks.au_control(request, 3, method="magic", **kwargs)
+    assert np.isfinite(tasks.au_control(request, 3, read="x_t", **kwargs)).all()  # R reads x_t itself
+    face = guided[0, 0] + 1.0
+    on_face = tasks.au_control(request, 3, face, **kwargs)  # a given face: frame 0, exactly
+    assert np.array_equal(on_face[:, 0], np.broadcast_to(face, (3, 68, 3)).astype(np.float32))
+    with pytest.raises(ValueError, match=r"neutral face must be finite landmarks of shape \(68, 3\)"):
+        tasks.au_control(request, 3, face[:60], **kwargs)
 
 
 def test_the_regressor_recipe_trains_and_its_checkpoint_loads_as_a_guide(tmp_path):

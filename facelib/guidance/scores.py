@@ -78,12 +78,19 @@ class CosineScore(_ChainScore):
 class AUCurveScore(_ChainScore):
     """score(x, t) = -sum over the constrained (frame, AU) of (R(x, t) - c)^2 / (2 tau^2) (B,): the Gaussian
     log-likelihood (up to a constant) of requested AU curves c (n, F, A) under the AU regressor R, where
-    ``constrained`` (n, F, A) is True (AUs a request leaves free do not count)."""
+    ``constrained`` (n, F, A) is True (AUs a request leaves free do not count).
+
+    With a ``denoiser`` (and the chain's ``diffusion``, see :meth:`for_chain`), R reads the denoiser's estimate
+    x0_hat(x, t) at time 0 instead of x (as :class:`DenoisedCosineScore` for text): the gradient then reaches x
+    through the denoiser, which keeps the change on motions the data have; read on x, guidance finds changes
+    that please R without producing the action units (the fine-control chapter measures both)."""
 
     network: torch.nn.Module
     curves: torch.Tensor
     constrained: torch.Tensor
     tolerance: float
+    denoiser: torch.nn.Module | None = None
+    diffusion: GaussianDiffusion | None = None
 
     def __post_init__(self):
         self.curves = torch.as_tensor(self.curves, dtype=torch.float32)
@@ -93,10 +100,20 @@ class AUCurveScore(_ChainScore):
                              f"{tuple(self.curves.shape)} and {tuple(self.constrained.shape)}")
         _check_positive("tolerance", self.tolerance)
 
+    def for_chain(self, diffusion):
+        if self.denoiser is None:
+            return super().for_chain(diffusion)
+        return replace(self, denoiser=diffusion.wrap(self.denoiser), diffusion=diffusion)
+
     def __call__(self, x, t):
         c = _repeated(self.curves, len(x)).to(device=x.device, dtype=x.dtype)
         m = _repeated(self.constrained, len(x)).to(x.device)
-        squared = torch.where(m, (self.network(x, t) - c) ** 2, torch.zeros((), dtype=x.dtype, device=x.device))
+        if self.denoiser is None:
+            read = self.network(x, t)
+        else:
+            x0_hat = self.diffusion.predict_x0(x, t.detach().round().long().cpu(), self.denoiser(x, t))
+            read = self.network(x0_hat, torch.zeros_like(t))
+        squared = torch.where(m, (read - c) ** 2, torch.zeros((), dtype=x.dtype, device=x.device))
         return -squared.sum((1, 2)) / (2 * self.tolerance ** 2)
 
 
