@@ -572,11 +572,13 @@ class AUControl(Sampling):
     scale: float = MEAN_SHIFT_SCALE  # the mean shift's s
     tolerance: float = AU_CURVE_TOLERANCE
     read: str = "x0_hat"  # what R reads: "x0_hat", the denoiser's estimate (the fine-control chapter), or "x_t"
+    reconstruction_scale: float = RECONSTRUCTION_SCALE  # with a given face: joins the frames to it (as Alg. 4's)
 
     def __post_init__(self):
         super().__post_init__()
         _check_choice("method", self.method, GUIDANCE_METHODS)
         _check_choice("read", self.read, HEAD_INPUTS)
+        _check_number("the reconstruction guidance scale", self.reconstruction_scale)
         _check_number("the guidance weight (lambda)", self.guidance_weight)
         _check_number("lr", self.lr, allow_none=True)
         _check_number("scale", self.scale)

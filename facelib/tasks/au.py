@@ -16,7 +16,7 @@ import torch
 from .. import data
 from ..config import AU_CURVE_LR, AUControl
 from ..face.aus import AU_NAMES
-from ..guidance import AUCurveScore, MeanShiftGuidance, OptimisationGuidance
+from ..guidance import AUCurveScore, MeanShiftGuidance, OptimisationGuidance, ReconstructionGuidance, chain
 from ..inpainting import KnownFrames, keep_known
 from .fill import known_noise
 from .label import step_scaled_lr
@@ -90,8 +90,9 @@ def au_control(curves, n=16, neutral=None, settings=AUControl(), denoiser=None, 
                **overrides):
     """n sequences (n, F, 68, 3) float32 in mm whose AU curves follow a request (a list of specs, the same for
     every sequence, or a list of n such lists).  ``neutral``: the neutral landmarks (68, 3) (or (n, 68, 3)) of
-    the face to animate, which is then frame 0 (re-drawn from q as Alg. 3's known frames, as in Alg. 4); None:
-    the model draws the face too.  ``settings``: :class:`facelib.config.AUControl`."""
+    the face to animate, which is then frame 0 (re-drawn from q as Alg. 3's known frames, with reconstruction
+    guidance joining the other frames to it, as geometry-adaptive generation does); None: the model draws the
+    face too.  ``settings``: :class:`facelib.config.AUControl`."""
     settings, shape = task_settings(settings, overrides, n)
     regressor = regressor or load_au_regressor(settings.dataset)
     ranges = data_ranges(settings.dataset)
@@ -113,6 +114,9 @@ def au_control(curves, n=16, neutral=None, settings=AUControl(), denoiser=None, 
         return denoiser.to_mm(x)
     given, known = neutral_frame(neutral, shape)
     x0, known_t = denoiser.to_model(given), torch.as_tensor(known).to(denoiser.device)
+    if settings.reconstruction_scale:
+        hook = chain(hook, ReconstructionGuidance(denoiser.model, diffusion, x0, known_t,
+                                                  settings.reconstruction_scale))
     hook = KnownFrames(diffusion, x0, known_t, known_noise(settings.seed), inner=hook)
     x_T = hook.start(torch.Generator().manual_seed(settings.seed))
     out = diffusion.run(denoiser.model, x_T, settings.seed, diffusion.schedule(), hook, None, progress)
