@@ -87,10 +87,12 @@ def keyframe_rows(args, evaluator):
     plain = tasks.unconditional(args.n, steps=args.steps, seed=5, progress=False)
     fid, fid_ci = fid_with_interval(evaluator, plain)
     rows = [["unconstrained", args.n, "", "", "", fid, fid_ci, (time.perf_counter() - t0) / args.n]]
-    for method in config.KEYFRAME_METHODS:
+    runs = [(m, None) for m in config.KEYFRAME_METHODS] + [("both", z) for z in args.scale]
+    for method, zeta in runs:
         t0 = time.perf_counter()
+        extra = {} if zeta is None else {"reconstruction_scale": zeta}
         x = np.concatenate([tasks.keyframes(keys, 1, neutral, steps=args.steps, method=method, seed=5 + k,
-                                            progress=False) for k, (keys, neutral) in enumerate(requests)])
+                                            progress=False, **extra) for k, (keys, neutral) in enumerate(requests)])
         seconds = (time.perf_counter() - t0) / args.n
         errors = np.array([tasks.key_errors(x[k:k + 1], keys, neutral).max() for k, (keys, neutral)
                            in enumerate(requests)])
@@ -99,7 +101,8 @@ def keyframe_rows(args, evaluator):
         fid, fid_ci = fid_with_interval(evaluator, x)
         interval = [float(v) for v in metrics.bootstrap_interval(np.mean, errors)]
         met = float(100 * ((errors <= 0.5) & smooth).mean())
-        rows.append([method, args.n, float(errors.mean()), interval, met, fid, fid_ci, seconds])
+        name = method if zeta is None else f"{method}, zeta {zeta:g}"
+        rows.append([name, args.n, float(errors.mean()), interval, met, fid, fid_ci, seconds])
         print(rows[-1], flush=True)
     return rows, ["denoiser_coma", "ic_coma_I"]
 
@@ -111,6 +114,8 @@ def main():
     parser.add_argument("--steps", type=int, default=None, help="reverse steps (default: the task's, config)")
     parser.add_argument("--lr", type=float, nargs="+", default=[None],
                         help="au: Adagrad rates to compare (default: the book's, config.AU_CURVE_LR, step-scaled)")
+    parser.add_argument("--scale", type=float, nargs="*", default=[],
+                        help="keyframes: more reconstruction scales zeta to try with 'both' (default: none)")
     parser.add_argument("--save", metavar="NAME", help="store the table in results/NAME.json")
     args = parser.parse_args()
     default = {"au": config.AUControl(), "keyframes": config.Keyframes()}[args.experiment]
