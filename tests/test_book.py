@@ -72,6 +72,8 @@ def test_notebooks_are_committed_without_outputs_and_listed():
         cells = json.loads(nb.read_text())["cells"]
         assert not any(c.get("outputs") for c in cells if c["cell_type"] == "code"), f"{nb.name} has outputs"
         assert f"book/{nb.stem}" in toc, f"{nb.name} is not in _toc.yml"
+        ids = [c.get("id") for c in cells]
+        assert len(set(ids)) == len(ids), f"{nb.name} repeats a cell id (nbformat renames it at every run)"
 
 
 def test_notebook_code_fits_the_page_column():

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from .. import data
+from .. import data, rig_fit
 from ..config import AU_CURVE_LR, AUControl
 from ..face.aus import AU_NAMES
 from ..guidance import AUCurveScore, MeanShiftGuidance, OptimisationGuidance, ReconstructionGuidance, chain
@@ -143,8 +143,6 @@ def fitted_curves(sequences, faces=None):
     :class:`~facelib.face.Face` per sequence (the face it animates: exact), or None for the known face nearest
     each sequence's neutral end (:func:`facelib.rig_fit.closest_face`; on a face that is not among them the fit
     also absorbs the difference of anatomy, several tenths of intensity on unseen test faces)."""
-    from .. import rig_fit
-
     x = np.asarray(sequences)
     if faces is None:
         known = rig_fit.known_faces()

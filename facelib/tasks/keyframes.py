@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from .. import data
 from ..config import Keyframes
 from ..guidance import ReconstructionGuidance
 from ..inpainting import KnownFrames
@@ -121,8 +122,6 @@ def random_keys(n, seed=0, dataset="coma", landmarks=MOBILE_LANDMARKS):
     """n random requests [(keys, neutral (68, 3))] that real motion can meet: for a random test sequence of
     ``dataset`` (an N2E one), its subject's neutral face and one key, the displacement of one of ``landmarks``
     at a frame in 10..35 of that sequence."""
-    from .. import data
-
     test = data.load_dataset(dataset, "test")
     n2e = np.flatnonzero(test.kinds == 0)
     rng = np.random.default_rng(seed)
