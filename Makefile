@@ -25,7 +25,6 @@ data: venv
 
 book: venv
 	$(BIN)/python -m facelib data
-	FACELIB_WORLD=2 $(BIN)/python -m facelib data  # the chapters already on world 2 (issue 25)
 	$(BIN)/jupyter-book build . --builder html --all -W --keep-going
 	@echo "The book is in _build/html/index.html"
 
@@ -36,7 +35,6 @@ chapter: venv
 # One torch thread per test worker: two workers with two OpenMP threads each on two cores thrash.
 test: venv
 	FACELIB_FAST=1 $(BIN)/python -m facelib data
-	FACELIB_FAST=1 FACELIB_WORLD=2 $(BIN)/python -m facelib data
 	FACELIB_FAST=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 $(BIN)/python -m pytest -n $(WORKERS) --nbmake --nbmake-timeout=1200 --durations=8 tests book
 
 clean:

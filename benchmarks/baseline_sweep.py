@@ -13,7 +13,7 @@ the rows this run measured.
 The rule that picks a setting is the book's (chapter 06): the best accuracy - 2 FID.  The picks go into
 config.ActorTraining and config.Motion3DGANTraining and are then trained at the full budget:
 
-    FACELIB_WORLD=2 python benchmarks/baseline_sweep.py --save baseline_sweep
+    python benchmarks/baseline_sweep.py --save baseline_sweep
 
 (12 candidates at a quarter of the budget: about 3 core-hours with one torch thread.)
 """

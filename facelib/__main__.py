@@ -153,10 +153,10 @@ def main(argv=None):
                    "denoiser_<dataset>_cfg)")
     p.add_argument("--only", nargs="+", default=None, help="train all: only these shipped checkpoints")
     p.add_argument("--missing", action="store_true", help="train all: skip the checkpoints that exist and were "
-                   "trained on this world (FACELIB_WORLD)")
+                   "trained on this world's datasets (config.WORLD)")
     p.add_argument("--out", default=None, help="checkpoint name or path stem (default: denoiser_<dataset>[_var], "
                    "guide_<dataset>_<type>, ic_<dataset>_<type>, deform_<method>_<split>, <baseline>_<dataset>); "
-                   "train all: a folder (default data/checkpoints)")
+                   "train all: a folder (default data/checkpoints/world2)")
     p.set_defaults(func=_train)
 
     cli_sample.add_parsers(sub)

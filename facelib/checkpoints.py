@@ -30,7 +30,7 @@ def checkpoint_paths(name):
 
 def world_fingerprint():
     """The synthetic world this process builds: {"version": config.WORLD, "fingerprint": the first 12 hex
-    digits of the sha256 of its committed dataset fingerprints (data/synthetic[/worldN]/fingerprints.json)}."""
+    digits of the sha256 of its committed dataset fingerprints (data/synthetic/fingerprints.json)}."""
     path = config.SYNTHETIC_DIR / "fingerprints.json"
     digest = hashlib.sha256(path.read_bytes()).hexdigest()[:12] if path.exists() else None
     return {"version": config.WORLD, "fingerprint": digest}
@@ -50,7 +50,7 @@ def check_world(meta, name):
     else:
         return
     raise ValueError(f"checkpoint {name} {why}; retrain it (a shipped one: `python -m facelib train all --missing "
-                     f"--only {Path(name).stem}`; FACELIB_WORLD selects the world)")
+                     f"--only {Path(name).stem}`)")
 
 
 def save_checkpoint(name, model, kind, model_config, **metadata):

@@ -13,26 +13,18 @@ from pathlib import Path
 PROJECT_ROOT = Path(__file__).resolve().parent.parent
 DATA_DIR = PROJECT_ROOT / "data"
 
-# The synthetic world's version.  World 2 (facelib/face/tissue.py: tissue mechanics, magnitudes
-# calibrated to published measurements) is being built while the book runs on world 1:
-# FACELIB_WORLD=2 selects it, and its dataset fingerprints, checkpoints and stored results live in
-# their own folders (``world2/``) until every model is retrained on it.  Then world 2 becomes the
-# only world and the folders and this switch go.
+# The synthetic world's version.  Version 2 (issue 25; facelib/face/tissue.py: tissue mechanics, magnitudes
+# calibrated to published measurements of real faces) replaced version 1, whose faces moved two to four times
+# less than real ones.  Every dataset, checkpoint and stored result records the version it was made on; a
+# checkpoint of another version is refused with the command that retrains it (checkpoints.check_world).
+# ``face.Face(..., world=1)`` remains only for chapter 01's comparison of the two versions (WORLDS).
+WORLD = 2
 WORLDS = (1, 2)
-
-
-def _world():
-    raw = os.environ.get("FACELIB_WORLD", "1").strip()
-    if raw not in {str(w) for w in WORLDS}:
-        raise ValueError(f"FACELIB_WORLD must be one of {WORLDS} (the synthetic world's version), got {raw!r}")
-    return int(raw)
-
-
-WORLD = _world()
-_WORLD_FOLDER = "" if WORLD == 1 else f"world{WORLD}"
-SYNTHETIC_DIR = DATA_DIR / "synthetic" / _WORLD_FOLDER
-CHECKPOINT_DIR = DATA_DIR / "checkpoints" / _WORLD_FOLDER
-RESULTS_DIR = PROJECT_ROOT / "results" / _WORLD_FOLDER
+SYNTHETIC_DIR = DATA_DIR / "synthetic"
+# Checkpoints live in a folder named after the world version they were trained on: a retrain on a new version
+# writes beside the old ones until it replaces them.
+CHECKPOINT_DIR = DATA_DIR / "checkpoints" / f"world{WORLD}"
+RESULTS_DIR = PROJECT_ROOT / "results"
 
 
 def fast_mode():
@@ -66,23 +58,20 @@ class DatasetSpec:
 DATASETS = {
     # Paper §4: 689 CoMA sequences from 12 subjects performing 12 actions.  CoMA's labels are
     # instructions ("lips up") that subjects interpret freely: our choice of a wide style spread
-    # makes them as hard to recognise on unseen subjects as the paper's GT row (83.8 %).  Our choice: 4 takes
+    # makes them as hard to recognise on unseen subjects as the paper's GT row (83.8 %).  World 2's
+    # broad, saturating expressions blur the labels into each other more than world 1's did (the IC read
+    # 76 % with a blend of 0.3): mixing at most 0.22 of another label in keeps the ground truth near 83.8 %.  Our choice: 4 takes
     # per (subject, label) plus one extra take for 113 random pairs gives exactly 689; 3 subjects
     # (a quarter) are held out for testing.
     "coma": DatasetSpec("coma", "coma", num_subjects=12, num_sequences=689, num_test_subjects=3,
                         takes_per_pair=4, seed=1001, style_gain_sigma=0.45, style_leak_probability=0.9,
-                        style_leak_max=0.4, style_blend_max=0.3),
+                        style_leak_max=0.4, style_blend_max=0.22),
     # Paper §4: 606 BU-4DFE recordings of 101 subjects x 6 emotions, each cut into an N2E and an
     # E2N sequence: 1212 sequences.  Our choice: 20 subjects held out for testing.
     "bu": DatasetSpec("bu", "bu", num_subjects=101, num_sequences=1212, num_test_subjects=20,
                       takes_per_pair=2, seed=2002, style_gain_sigma=0.25, style_leak_probability=0.5,
                       style_leak_max=0.2, style_blend_max=0.2),
 }
-if WORLD == 2:
-    # Our choice: world 2's broad, saturating expressions blur CoMA's labels into each other more than
-    # world 1's (the IC read 76 % of the held-out subjects' sequences with world 1's spread); mixing
-    # less of another label in keeps the ground truth near the paper's 83.8 %.
-    DATASETS["coma"] = replace(DATASETS["coma"], style_blend_max=0.22)
 SPLITS = ("train", "test", "all")
 
 
@@ -244,17 +233,16 @@ class EvaluatorTraining(Optimisation):
 class ActorTraining(Optimisation):
     """The ACTOR-style transformer CVAE baseline of Table 1."""
 
-    # World 2 (issue 25): the same compute and parameter budget as the denoiser (12,000 steps; three
-    # decoder layers, 596 k parameters against its 616 k), and the KL weight of the tuning sweep.
-    steps: int = 3000 if WORLD == 1 else 12000  # world 1, our choice: about 10 minutes on a CPU core
+    # Issue 25: the same compute and parameter budget as the denoiser (12,000 steps; three decoder
+    # layers, 596 k parameters against its 616 k), and the KL weight of the tuning sweep.
+    steps: int = 12000
     lr: float = 1e-3  # our choice: at 2e-4 the decoder underfits in this budget and ignores the label
     weight_decay: float = 0.01  # torch's AdamW default
     dataset: str = "coma"
-    # World 1, our choice 1e-3 (ACTOR: 1e-5 with its loss scaling); world 2: the tuning sweep's pick
-    # (benchmarks/baseline_sweep.py: best accuracy - 2 FID among 1e-3, 1e-2, 3e-2 at a quarter budget;
-    # results/world2/baseline_sweep.json).
-    kl_weight: float = 1e-3 if WORLD == 1 else 1e-2
-    depth: int = 2 if WORLD == 1 else 3  # transformer layers of the encoder and of the decoder
+    # The tuning sweep's pick (ACTOR: 1e-5 with its loss scaling; benchmarks/baseline_sweep.py: best
+    # accuracy - 2 FID among 1e-3, 1e-2, 3e-2 at a quarter budget; results/baseline_sweep.json).
+    kl_weight: float = 1e-2
+    depth: int = 3  # transformer layers of the encoder and of the decoder
 
 
 @dataclass(frozen=True)
@@ -271,12 +259,12 @@ class MotionClipTraining(Optimisation):
 class Motion3DGANTraining(Optimisation):
     """The Motion3DGAN-style WGAN-GP on SRVFs of Table 1 (Otberdout et al.)."""
 
-    # World 2 (issue 25): the denoiser's parameter budget (160 channels: a 643 k-parameter generator
-    # against its 616 k) and a comparable compute budget (3,000 generator steps, 15,000 critic steps).
-    steps: int = 1500 if WORLD == 1 else 3000  # generator steps (world 1, our choice: minutes on a CPU core)
-    # The Motion3DGAN paper's 1e-4 (world 1); world 2: the tuning sweep's pick (benchmarks/baseline_sweep.py:
-    # best accuracy - 2 FID among 1e-4 ... 5e-3 at a quarter budget; 1e-4 reads 12 %, 2e-3 60 %).
-    lr: float = 1e-4 if WORLD == 1 else 2e-3
+    # Issue 25: the denoiser's parameter budget (160 channels: a 643 k-parameter generator against its
+    # 616 k) and a comparable compute budget (3,000 generator steps, 15,000 critic steps).
+    steps: int = 3000  # generator steps
+    # The tuning sweep's pick (benchmarks/baseline_sweep.py: best accuracy - 2 FID among 1e-4 ... 5e-3 at a
+    # quarter budget; the Motion3DGAN paper's 1e-4 reads 12 %, 2e-3 60 %).
+    lr: float = 2e-3
     optimizer: str = "adam"
     betas: tuple = (0.5, 0.9)  # WGAN-GP's Adam
     dataset: str = "coma"
@@ -285,7 +273,7 @@ class Motion3DGANTraining(Optimisation):
     adversarial_weight: float = 1.0  # alpha_1 (the Motion3DGAN paper)
     reconstruction_weight: float = 10.0  # alpha_2 (the Motion3DGAN paper)
     smoothing: float = 1.0  # our choice: Gaussian sigma (frames) applied before the SRVF (models.motion3dgan.prepare)
-    channels: int = 64 if WORLD == 1 else 160  # of the generator's and the critic's convolutions
+    channels: int = 160  # of the generator's and the critic's convolutions
 
 
 @dataclass(frozen=True)
@@ -299,23 +287,22 @@ class LSTMFillerTraining(Optimisation):
     alpha_gt: float = 10.0  # Berson et al.'s weight of the known frames
 
 
-# §6: the deformation experiments use CoMA.  World 2 (issue 25): the faces of both datasets, 90
+# §6: the deformation experiments use CoMA.  Our choice (issue 25): the faces of both datasets, 90
 # training identities, so that the deformers can learn how identity changes the deformation.
-DEFORMATION_DATASET = "coma" if WORLD == 1 else "coma+bu"
+DEFORMATION_DATASET = "coma+bu"
 # §6's expression split holds out 3 expressions; the paper does not name them.  Our choice: one smile, one jaw
-# opening and one asymmetric motion, each with relatives left in training.  World 2: a pucker instead of the
-# asymmetric motion, whose sideways jaw (AD30) no other label has: holding it out tested extrapolation to an
-# action unit never seen, not generalisation to a new combination.
-HELD_OUT_EXPRESSIONS = ("high_smile", "mouth_open", "mouth_side" if WORLD == 1 else "mouth_middle")
+# opening and a pucker, each with relatives left in training.  Not the asymmetric mouth_side, whose sideways
+# jaw (AD30) no other label has: holding it out would test extrapolation to an action unit never seen, not
+# generalisation to a new combination.
+HELD_OUT_EXPRESSIONS = ("high_smile", "mouth_open", "mouth_middle")
 
 
 @dataclass(frozen=True)
 class DeformationTraining(Optimisation):
     """The deformation networks of Table 5 (S2D: Adam, lr 1e-3, batch 16 meshes)."""
 
-    # Our choice: world 1, 6 to 14 minutes on one core for the spiral networks; world 2, whose 90 training
-    # faces give 10 times the pairs, 10,000.
-    steps: int = 4000 if WORLD == 1 else 10000
+    # Our choice: 90 training faces give many pairs; 10,000 steps are 10 to 19 minutes on one core.
+    steps: int = 10000
     batch_size: int = 4  # sequences per batch (our choice), frames_per_batch meshes each: S2D's 16
     lr: float = 1e-3  # S2D
     optimizer: str = "adam"
@@ -342,32 +329,31 @@ GUIDANCE_METHODS = ("adagrad", "mean_shift")  # Alg. 1; classic classifier guida
 # guidance (Ho & Salimans 2022), a label-conditional denoiser with no classifier (DenoiserTraining.conditional)
 LABEL_GUIDANCE = ("classifier", "cfg")
 # The mean shift's gradient scale s: at 1 (Dhariwal & Nichol's) it steers too weakly here; 10 is the book's pick
-# (results/world2/fast_sampling_guidance.json: s = 1, 3, 10, 30 with both samplers at 50 and 200 steps)
+# (results/fast_sampling_guidance.json: s = 1, 3, 10, 30 with both samplers at 50 and 200 steps)
 MEAN_SHIFT_SCALE = 10.0
 CFG_SCALE = 2.5  # classifier-free guidance's weight w: MDM's (Tevet et al. 2023)
 # The mean shift's scale for editing (config.Edit; our choice): 20, where 3 edits in 4 read the new label with the
-# neutral frame kept (results/world2/fast_sampling_edit.json: 56 % at 10, 75 % at 20, 88 % at 30; the first regenerated
+# neutral frame kept (results/fast_sampling_edit.json: 56 % at 10, 75 % at 20, 88 % at 30; the first regenerated
 # frame then steps 0.6, 1.3 and 1.7 mm further from the neutral one than the original's does)
 EDIT_MEAN_SHIFT_SCALE = 20.0
 # Alg. 1's Adagrad learning rate, per dataset, for a chain of LR_REFERENCE_STEPS reverse steps: not in the
 # paper; each is the pick of the label-control chapter's sweep (48 guided sequences per rate, 200 steps, best
 # accuracy - 2 FID).
 # A rate is a step length in the normalised landmark space, so it depends on the data (tasks.adagrad_lr).
-# World 2: results/world2/label_sweep.json (coma 0.03: 89.6 % at FID 2.35; bu 0.03: 100 % at FID 0.13).
-ADAGRAD_LR = {"coma": 0.03, "bu": 0.1} if WORLD == 1 else {"coma": 0.03, "bu": 0.03}
+# results/label_sweep.json: coma 0.03 (89.6 % at FID 2.35), bu 0.03 (100 % at FID 0.13).
+ADAGRAD_LR = {"coma": 0.03, "bu": 0.03}
 LR_REFERENCE_STEPS = 200
-# The Adagrad rate of Alg. 4's type-S guidance (our choice): world 1, the geometry-adaptive chapter's; world 2, the
-# pick of results/world2/geometry_lr.json (the smallest rate whose accuracy interval overlaps the best rate's, with
-# the faces moving at most 1.5 times the data's)
-GEOMETRY_LR = 0.01 if WORLD == 1 else 0.03
+# The Adagrad rate of Alg. 4's type-S guidance (our choice): the pick of results/geometry_lr.json (the smallest
+# rate whose accuracy interval overlaps the best rate's, with the faces moving at most 1.5 times the data's)
+GEOMETRY_LR = 0.03
 HARMONISING_PASSES = 5  # Alg. 4 line 1: "for i = 1 to 5"
 RECONSTRUCTION_SCALE = 2.0  # our choice for reconstruction guidance: the sweep of the geometry-adaptive chapter
 TEXT_DATASET = "coma+bu"  # paper §5.2: text control works on CoMA and BU-4DFE merged (18 actions)
 # Alg. 2's lambda (paper: 0.01) and Adagrad rate (not in the paper) for a chain of TEXT_LR_REFERENCE_STEPS
 # reverse steps: the pick of the text-control chapter's sweep (72 raw-text sequences, 100 steps, best accuracy - 2 FID)
-# World 2: results/world2/text_sweep_cosine.json (lambda 0.001, rate 0.1: 77.8 % at FID 23.0).
-TEXT_GUIDANCE_WEIGHT = 0.0003 if WORLD == 1 else 0.001
-TEXT_LR = 0.2 if WORLD == 1 else 0.1
+# results/text_sweep_cosine.json: lambda 0.001, rate 0.1 (77.8 % at FID 23.0).
+TEXT_GUIDANCE_WEIGHT = 0.001
+TEXT_LR = 0.1
 TEXT_LR_REFERENCE_STEPS = 100
 # What the text head reads in Eq. 10: x_t itself (Alg. 2 as written) or, not in the paper, the denoiser's
 # estimate x0_hat of the clean sequence (guidance.DenoisedCosineScore)
@@ -378,8 +364,8 @@ TEXT_SCORES = ("cosine", "contrastive")
 # The contrastive score's lambda (the paper's 0.01) and Adagrad rate at TEXT_LR_REFERENCE_STEPS steps: the pick
 # of appendix A1's stored sweep (72 sequences, two seeds, best Acc - 2 FID summed over both tasks)
 CONTRASTIVE_GUIDANCE_WEIGHT = 0.01
-# World 2: results/world2/text_sweep_contrastive.json (rate 0.06: 59.7 % at FID 23.1).
-CONTRASTIVE_LR = 0.042 if WORLD == 1 else 0.06
+# results/text_sweep_contrastive.json: rate 0.06 (59.7 % at FID 23.1).
+CONTRASTIVE_LR = 0.06
 # How sharply a text is matched to the training descriptions by the contrastive score (our choice: an enriched
 # sentence and its other order, at a cosine of about 0.985, get weights of about 0.95 and 0.05)
 MATCH_TEMPERATURE = 0.005
@@ -486,7 +472,7 @@ class LabelControl(Sampling):
     def guidance_method(self):
         """The classifier guidance this run uses: ``method``, or Alg. 1 under DDPM and the mean shift under DDIM,
         whose deterministic chain keeps the jitter of Alg. 1's Adagrad steps to the end
-        (results/world2/fast_sampling_steps.json)."""
+        (results/fast_sampling_steps.json)."""
         if self.method is not None:
             return self.method
         return "adagrad" if self.sampler == "ddpm" else "mean_shift"
@@ -556,6 +542,8 @@ class TextControl(Sampling):
 
 AU_CURVE_TOLERANCE = 0.1  # tau of AU-curve control: log N(c | R(x_t, t), tau^2), in AU intensity units (our choice)
 AU_CURVE_LR = 0.03  # the Adagrad rate of AU-curve control at 50 steps (our choice; the fine-control chapter)
+AU_MEASURABLE_FIT_ERROR = 0.05  # our choice: AU-curve control is scored on the AUs that the rig fit recovers
+# within this (mean absolute error, intensity units) on real test sequences (tasks.fit_floor), no others
 
 
 @dataclass(frozen=True)
@@ -573,11 +561,13 @@ class AUControl(Sampling):
     tolerance: float = AU_CURVE_TOLERANCE
     read: str = "x0_hat"  # what R reads: "x0_hat", the denoiser's estimate (the fine-control chapter), or "x_t"
     reconstruction_scale: float = RECONSTRUCTION_SCALE  # with a given face: joins the frames to it (as Alg. 4's)
+    au_weight: float = 1.0  # the weight of log N(c | R, tau^2); 0: "AU guidance off" (tasks.au.AU_GUIDANCE_OFF)
 
     def __post_init__(self):
         super().__post_init__()
         _check_choice("method", self.method, GUIDANCE_METHODS)
         _check_choice("read", self.read, HEAD_INPUTS)
+        _check_number("the AU score's weight", self.au_weight)
         _check_number("the reconstruction guidance scale", self.reconstruction_scale)
         _check_number("the guidance weight (lambda)", self.guidance_weight)
         _check_number("lr", self.lr, allow_none=True)

@@ -261,7 +261,7 @@ def markdown_table(record, fmt="{:.2f}"):
             del columns[i]
             for row in rows:
                 row[i - 1] = f"{row[i - 1]} {row.pop(i)}".strip()
-    path = result_path(record["name"])  # results/NAME.json, or results/world2/NAME.json in world 2
+    path = result_path(record["name"])  # results/NAME.json
     path = path.relative_to(config.PROJECT_ROOT) if path.is_relative_to(config.PROJECT_ROOT) else path
     head = (f"*Stored result* `{path}`: {record['title']} (n = {record['n']}, "
             f"{record['wall_time_s'] / 60:.0f} min on {record['cores']} cores with {record['torch_threads']} "

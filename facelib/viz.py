@@ -400,3 +400,47 @@ def confusion_figure(counts, class_names, title="", figsize=(6.5, 5.5)):
     ax.grid(False)
     fig.colorbar(im, ax=ax, shrink=0.7, label="fraction of the true class")
     return fig
+
+
+def au_curves_figure(requested, curves, aus, au_names, figsize=None):
+    """Requested against obtained action-unit curves (AU-curve control): one panel per AU of ``aus`` (names of
+    ``au_names``), the requested curve (``requested``, (F, A)) in black, and each entry of ``curves`` ({label:
+    (n, F, A) curves, e.g. the rig fit of guided sequences, of unguided ones, the regressor's reading}) as thin
+    lines of one colour per label.  x: frame, y: intensity.  Returns the figure."""
+    requested = np.asarray(requested)
+    fig, axes = plt.subplots(1, len(aus), figsize=figsize or (3.2 * len(aus), 2.8), squeeze=False, sharey=True)
+    for ax, name in zip(axes[0], aus):
+        k = au_names.index(name)
+        ax.plot(requested[:, k], "k--", lw=2, label="requested")
+        for j, (label, c) in enumerate(curves.items()):
+            for i, seq in enumerate(np.asarray(c)):
+                ax.plot(seq[:, k], color=f"C{j}", lw=1, alpha=0.8, label=label if i == 0 else None)
+        ax.set(title=name, xlabel="frame")
+    axes[0, 0].set_ylabel("intensity")
+    axes[0, 0].legend(fontsize=7)
+    fig.tight_layout()
+    return fig
+
+
+def keyframe_figure(sequences, key, neutral, p95, figsize=(9.5, 3.0)):
+    """One landmark keyframe ``key`` (frame, landmark, displacement from ``neutral`` (68, 3)) met by several
+    methods, ``sequences`` ({method: (n, F, 68, 3) in mm}).  Left: the keyed landmark's displacement from the
+    neutral face along the key's direction (mm), the key a star; right: its frame-to-frame speed (mm/frame)
+    with the real 95th percentile ``p95`` dashed.  Returns the figure."""
+    f, l, target = key["frame"], key["landmark"], np.asarray(key["displacement"], dtype=float)
+    direction = target / np.linalg.norm(target)
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=figsize)
+    for j, (method, x) in enumerate(sequences.items()):
+        path = np.asarray(x, dtype=float)[:, :, l]
+        along, speed = (path - neutral[l]) @ direction, np.linalg.norm(np.diff(path, axis=1), axis=-1)
+        for i in range(len(path)):
+            ax.plot(along[i], color=f"C{j}", lw=1, label=method if i == 0 else None)
+            bx.plot(np.arange(1, path.shape[1]) - 0.5, speed[i], color=f"C{j}", lw=1)
+    ax.plot([f], [np.linalg.norm(target)], "k*", ms=12, label=f"key (frame {f})")
+    bx.axhline(p95, color="k", ls="--", lw=1, label="real 95th percentile")
+    ax.set(xlabel="frame", ylabel=f"landmark {l}: displacement (mm)")
+    bx.set(xlabel="frame", ylabel="speed (mm/frame)")
+    ax.legend(fontsize=7)
+    bx.legend(fontsize=7)
+    fig.tight_layout()
+    return fig

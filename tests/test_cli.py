@@ -6,7 +6,7 @@ import pytest
 import torch
 import trimesh
 
-from facelib import __main__ as cli, config, meshio as io, tasks
+from facelib import __main__ as cli, cli_sample, config, meshio as io, tasks
 from facelib.__main__ import main
 from facelib.face import template as tpl
 
@@ -210,7 +210,7 @@ def test_cli_classifier_free_label_control_and_edit(tmp_path, coma_test, capsys)
         assert message in capsys.readouterr().err and not out.exists()
 
 
-def test_cli_keyframes_and_au_curves(tmp_path, coma_test, capsys):
+def test_cli_keyframes_and_au_curves(tmp_path, coma_test, capsys, monkeypatch):
     neutral = coma_test.subject_neutrals()[0]
     keys = tmp_path / "keys.json"
     keys.write_text(json.dumps({"neutral": neutral.tolist(),
@@ -223,7 +223,7 @@ def test_cli_keyframes_and_au_curves(tmp_path, coma_test, capsys):
     with pytest.raises(SystemExit):
         main(["sample", "keyframes", "--constraints", str(keys), "--out", str(out)])
     assert "integer in 0..39" in capsys.readouterr().err and not out.exists()  # nothing written on failure
-    if config.WORLD == 1:  # world 1 ships no AU regressor: the error names the command that trains one
-        with pytest.raises(SystemExit):
-            main(["sample", "au", "--curve", "AU12:0@0,0.8@20", "--out", str(out)])
-        assert "au_regressor_coma not found" in capsys.readouterr().err and not out.exists()
+    monkeypatch.setitem(cli_sample.GUIDES, "au", "au_regressor_{}_absent")  # a missing regressor: named, with its command
+    with pytest.raises(SystemExit):
+        main(["sample", "au", "--curve", "AU12:0@0,0.8@20", "--out", str(out)])
+    assert "au_regressor_coma_absent not found" in capsys.readouterr().err and not out.exists()

@@ -105,3 +105,22 @@ def test_random_requests_stay_in_the_data_and_fitted_requests_score_zero():
     assert tasks.curve_errors(exact + 0.1, requests) == pytest.approx([0.1] * 6)
     pairs = tasks.never_together("coma")
     assert pairs and all(a in AU_NAMES and b in AU_NAMES for a, b in pairs)
+
+
+def test_au_guidance_off_is_the_same_chain_and_face_with_the_au_score_weighted_zero(denoiser):
+    torch.manual_seed(0)
+    regressor = tasks.TrainedGuide(AURegressor(AURegressorConfig(width=32, depth=1, heads=2, ff=64)).eval(),
+                                   "coma", "au", AU_NAMES, denoiser.normalizer,
+                                   {"training": {"num_diffusion_steps": 2000}})
+    kwargs = dict(steps=4, seed=2, denoiser=denoiser, regressor=regressor, progress=False)
+    face = tasks.unconditional(1, steps=4, seed=1, denoiser=denoiser, progress=False)[0, 0]
+    assert tasks.AU_GUIDANCE_OFF == {"au_weight": 0.0}  # one named setting, used by the benchmark and the chapter
+    off = tasks.au_control(["AU26:1.0"], 2, face, **kwargs, **tasks.AU_GUIDANCE_OFF)
+    assert np.array_equal(off, tasks.au_control(["AU12:0.5"], 2, face, **kwargs, **tasks.AU_GUIDANCE_OFF))  # no request counts
+    assert np.array_equal(off[:, 0], np.broadcast_to(face, (2, 68, 3)))  # the same face at frame 0
+    on = tasks.au_control(["AU26:1.0"], 2, face, **kwargs)
+    assert not np.allclose(off, on)  # with its weight, the AU score moves the sequences
+    half = tasks.au_control(["AU26:1.0"], 2, face, au_weight=0.5, **kwargs)
+    assert not np.allclose(half, on) and not np.allclose(half, off)
+    with pytest.raises(ValueError, match="the AU score's weight must be a non-negative number"):
+        tasks.au_control(["AU26:1.0"], 2, face, au_weight=-1.0, **kwargs)

@@ -98,3 +98,29 @@ def test_confusion_figure_writes_each_nonzero_count_in_its_cell():
     assert written == {((0, 0), "3"), ((1, 0), "1"), ((1, 1), "2")}
     assert np.allclose(ax.images[0].get_array(), [[0.75, 0.25], [0, 1]])
     plt.close("all")
+
+
+def test_au_curves_figure_draws_the_request_and_each_sequence_per_au():
+    names = ("AU1", "AU2", "AU12L")
+    requested = np.zeros((40, 3))
+    requested[:, 2] = np.linspace(0, 0.8, 40)
+    fitted, read = np.full((2, 40, 3), 0.5), np.full((1, 40, 3), 0.3)
+    fig = viz.au_curves_figure(requested, {"rig fit": fitted, "R reads": read}, ["AU12L", "AU2"], names)
+    smile, brow = fig.axes
+    assert smile.get_title() == "AU12L" and brow.get_title() == "AU2" and len(smile.lines) == 1 + 2 + 1
+    assert smile.lines[0].get_ydata()[-1] == pytest.approx(0.8) and list(smile.lines[3].get_ydata()[:2]) == [0.3, 0.3]
+    assert [t.get_text() for t in smile.get_legend().get_texts()] == ["requested", "rig fit", "R reads"]
+    plt.close(fig)
+
+
+def test_keyframe_figure_plots_the_displacement_along_the_key_and_the_speed():
+    neutral = np.zeros((68, 3))
+    x = np.zeros((1, 40, 68, 3))
+    x[0, :, 54, 1] = np.minimum(np.arange(40), 8)  # the corner rises 1 mm a frame up to 8 mm
+    key = {"frame": 25, "landmark": 54, "displacement": [0.0, 8.0, 0.0]}
+    fig = viz.keyframe_figure({"replace": x, "both": x + 0.5}, key, neutral, p95=0.7)
+    path, speed = fig.axes
+    assert list(path.lines[0].get_ydata()[[0, 5, 30]]) == [0.0, 5.0, 8.0]
+    assert path.lines[2].get_xdata()[0] == 25 and path.lines[2].get_ydata()[0] == pytest.approx(8.0)  # the key
+    assert speed.lines[0].get_ydata()[0] == pytest.approx(1.0) and speed.lines[-1].get_ydata()[0] == 0.7
+    plt.close(fig)

@@ -12,7 +12,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import config
 from .aus import AU_NAMES, NUM_AUS
 
 COMA_LABELS = ("bareteeth", "cheeks_in", "eyebrow", "high_smile", "lips_back", "lips_up",
@@ -43,14 +42,16 @@ RECIPES = {
     "cheeks_in": Recipe(_r(AD35=(0.7, 1.0), AU18=(0.1, 0.4), AU23=(0.0, 0.3))),
     "eyebrow": Recipe(_r(AU1=(0.7, 1.0), AU2=(0.7, 1.0), AU5=(0.2, 0.6)),
                       variants=((0.3, _r(AU4=(0.7, 1.0), AU7=(0.1, 0.4))),)),
-    "high_smile": Recipe(_r(AU6=(0.6, 1.0), AU12L=(0.8, 1.0), AU12R=(0.8, 1.0), AU25=(0.3, 0.7),
+    # World 2 (issue 25): CoMA's subjects smile and open the mouth broadly, as its scans show (world 1's
+    # recipes, AU12 0.8-1.0 and AU26 0.5-0.8, made a polite smile and a half-open mouth).
+    "high_smile": Recipe(_r(AU6=(0.7, 1.0), AU12L=(0.95, 1.2), AU12R=(0.95, 1.2), AU25=(0.3, 0.7),
                             AU26=(0.0, 0.2))),
     "lips_back": Recipe(_r(AU20=(0.5, 0.8), AU23=(0.6, 1.0), AU12L=(0.1, 0.3), AU12R=(0.1, 0.3))),
     "lips_up": Recipe(_r(AU10=(0.6, 1.0), AU17=(0.2, 0.5), AU18=(0.2, 0.5))),
     "mouth_down": Recipe(_r(AU15=(0.7, 1.0), AU17=(0.2, 0.5), AU26=(0.05, 0.25))),
     "mouth_extreme": Recipe(_r(AU25=(0.8, 1.0), AU26=(0.9, 1.3), AU20=(0.5, 0.9), AU2=(0.0, 0.5))),
     "mouth_middle": Recipe(_r(AU18=(0.6, 1.0), AU23=(0.3, 0.7), AU17=(0.0, 0.3))),
-    "mouth_open": Recipe(_r(AU25=(0.6, 1.0), AU26=(0.5, 0.8))),
+    "mouth_open": Recipe(_r(AU25=(0.7, 1.0), AU26=(0.7, 1.0))),
     "mouth_side": Recipe(_r(AD30=(0.6, 1.0), AU12L=(0.5, 0.9)),
                          variants=((0.5, _r(AD30=(-1.0, -0.6), AU12R=(0.5, 0.9))),)),
     "mouth_up": Recipe(_r(AU17=(0.7, 1.0), AU10=(0.1, 0.4), AU23=(0.2, 0.5), AU15=(0.0, 0.3))),
@@ -63,15 +64,6 @@ RECIPES = {
     "sad": Recipe(_r(AU1=(0.6, 1.0), AU4=(0.4, 0.8), AU15=(0.6, 1.0), AU17=(0.2, 0.5))),
     "surprise": Recipe(_r(AU1=(0.7, 1.0), AU2=(0.7, 1.0), AU5=(0.5, 0.9), AU25=(0.6, 1.0), AU26=(0.5, 0.9))),
 }
-# World 2 (issue 25): CoMA's subjects perform "high smile" and "mouth open" broadly, as its scans
-# show; world 1's recipes made them a polite smile and a half-open mouth.
-WORLD2_RECIPES = {
-    "high_smile": Recipe(_r(AU6=(0.7, 1.0), AU12L=(0.95, 1.2), AU12R=(0.95, 1.2), AU25=(0.3, 0.7),
-                            AU26=(0.0, 0.2))),
-    "mouth_open": Recipe(_r(AU25=(0.7, 1.0), AU26=(0.7, 1.0))),
-}
-if config.WORLD == 2:
-    RECIPES = {**RECIPES, **WORLD2_RECIPES}
 MAX_INTENSITY = 1.5  # the strongest any AU can be pushed (1 = a typical strong apex)
 LEAK_EXCLUDED = ("AD30", "AU45", "AU26")  # never leaked: signed / blink / large jaw motion
 

@@ -89,6 +89,7 @@ class AUCurveScore(_ChainScore):
     curves: torch.Tensor
     constrained: torch.Tensor
     tolerance: float
+    weight: float = 1.0  # its weight in the guided objective (AUControl.au_weight)
     denoiser: torch.nn.Module | None = None
     diffusion: GaussianDiffusion | None = None
 
@@ -99,6 +100,7 @@ class AUCurveScore(_ChainScore):
             raise ValueError(f"curves and constrained must be two (n, F, A) arrays of one shape, got "
                              f"{tuple(self.curves.shape)} and {tuple(self.constrained.shape)}")
         _check_positive("tolerance", self.tolerance)
+        _check_positive("weight", self.weight)  # zero: no score at all (tasks.au.no_au_score)
 
     def for_chain(self, diffusion):
         if self.denoiser is None:
@@ -114,7 +116,7 @@ class AUCurveScore(_ChainScore):
             x0_hat = self.diffusion.predict_x0(x, t.detach().round().long().cpu(), self.denoiser(x, t))
             read = self.network(x0_hat, torch.zeros_like(t))
         squared = torch.where(m, (read - c) ** 2, torch.zeros((), dtype=x.dtype, device=x.device))
-        return -squared.sum((1, 2)) / (2 * self.tolerance ** 2)
+        return -self.weight * squared.sum((1, 2)) / (2 * self.tolerance ** 2)
 
 
 def nearest_wording(description_table, text_embeddings):

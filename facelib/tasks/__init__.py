@@ -16,8 +16,8 @@ task's frozen dataclass in facelib/config.py (the book's recommended values; ``.
 printed algorithm, ``.fast()`` a few steps) and ``overrides`` change single fields, e.g.
 ``tasks.label_control("high_smile", 16, steps=100)``.
 """
-from .au import (au_control, curve_errors, data_ranges, fit_floor, fitted_curves, never_together, parse_curve,
-                 random_requests, requested_curves)
+from .au import (AU_GUIDANCE_OFF, au_control, curve_errors, data_ranges, fit_floor, fitted_curves, measurable_aus,
+                 never_together, parse_curve, random_requests, requested_curves)
 from .decoder import decoder_then_diffusion
 from .edit import check_sequences, edit, invert, keep_on_path
 from .fill import fill
@@ -31,7 +31,7 @@ from .text import text_control, text_guidance_weight, text_lr, text_score
 from .unconditional import unconditional
 
 __all__ = ["check_keys", "key_errors", "key_speeds", "keyframes", "random_keys", "read_constraints",
-           "real_speed_p95", "au_control", "curve_errors", "data_ranges", "fit_floor", "fitted_curves",
+           "real_speed_p95", "AU_GUIDANCE_OFF", "au_control", "curve_errors", "data_ranges", "fit_floor", "fitted_curves", "measurable_aus",
            "never_together", "parse_curve", "random_requests", "requested_curves", "load_au_regressor",
            "decoder_then_diffusion", "check_sequences", "edit", "invert", "keep_on_path", "check_labels",
            "label_sampler", "load_conditional_denoiser", "table1_generators", "fill", "geometry_adaptive",

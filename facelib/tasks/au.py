@@ -14,7 +14,7 @@ import numpy as np
 import torch
 
 from .. import data, rig_fit
-from ..config import AU_CURVE_LR, AUControl
+from ..config import AU_CURVE_LR, AU_MEASURABLE_FIT_ERROR, AUControl
 from ..face.aus import AU_NAMES
 from ..guidance import AUCurveScore, MeanShiftGuidance, OptimisationGuidance, ReconstructionGuidance, chain
 from ..inpainting import KnownFrames, keep_known
@@ -24,6 +24,10 @@ from .loading import guided_chain, load_au_regressor, task_settings
 
 AU_ALIASES = {"AU12": ("AU12L", "AU12R")}  # a symmetric smile: both lip corner pullers
 AU_CURVE_REFERENCE_STEPS = 50  # AU_CURVE_LR is chosen for chains of this length
+# The baseline that separates what the AU guidance adds from what animating a given face costs: the same chain
+# on the same face (frame 0 known, reconstruction guidance to it) with the AU score's weight zero.  Not plain
+# sampling: Alg. 1's Adagrad steps still climb lambda log p_theta, a pull towards the denoiser's mean mu_theta.
+AU_GUIDANCE_OFF = {"au_weight": 0.0}
 
 
 def au_names_of(name):
@@ -102,7 +106,8 @@ def au_control(curves, n=16, neutral=None, settings=AUControl(), denoiser=None, 
     target, mask = map(np.stack, zip(*(requested_curves(c, settings.num_frames, ranges) for c in per_sequence)))
     denoiser, diffusion = guided_chain(regressor, denoiser, settings)
     reader = dict(denoiser=denoiser.model, diffusion=diffusion) if settings.read == "x0_hat" else {}
-    score = AUCurveScore(regressor.model, target, mask, settings.tolerance, **reader)
+    score = (AUCurveScore(regressor.model, target, mask, settings.tolerance, settings.au_weight, **reader)
+             if settings.au_weight else no_au_score)
     if settings.method == "adagrad":
         lr = settings.lr if settings.lr is not None else step_scaled_lr(
             AU_CURVE_LR, AU_CURVE_REFERENCE_STEPS, settings.steps, regressor.meta["training"]["num_diffusion_steps"])
@@ -121,6 +126,11 @@ def au_control(curves, n=16, neutral=None, settings=AUControl(), denoiser=None, 
     x_T = hook.start(torch.Generator().manual_seed(settings.seed))
     out = diffusion.run(denoiser.model, x_T, settings.seed, diffusion.schedule(), hook, None, progress)
     return keep_known(denoiser.to_mm(out), given, known)
+
+
+def no_au_score(x, t):
+    """The AU score at weight zero (:data:`AU_GUIDANCE_OFF`): 0 for every sequence, R not even read."""
+    return 0.0 * x.flatten(1).sum(1)
 
 
 def neutral_frame(neutral, shape):
@@ -163,6 +173,14 @@ def fit_floor(dataset="coma", n=30, active=0.1):
     on = np.abs(w) > active
     return {a: float(np.abs(fit - w)[..., k][on[..., k]].mean()) for k, a in enumerate(AU_NAMES)
             if on[..., k].sum() >= 20}
+
+
+def measurable_aus(floor, dataset="coma", max_error=AU_MEASURABLE_FIT_ERROR):
+    """The AUs that requests may use when the result is scored by the rig fit: those whose fit error on real
+    sequences (``floor``, :func:`fit_floor`) is at most ``max_error``, that the data push to at least 0.5, and not
+    the blink AU45 (a blink is over in a few frames)."""
+    ranges = data_ranges(dataset)
+    return [a for a, e in floor.items() if e <= max_error and ranges[a][1] >= 0.5 and a != "AU45"]
 
 
 def curve_errors(fitted, requests, num_frames=40):

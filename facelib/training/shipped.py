@@ -28,12 +28,11 @@ SHIPPED = {
     "lstm_filler_coma": ("lstm_filler", {}),
     **{f"deform_{m}_{s}": ("deformer", {"method": m, "split": s}) for m in _DEFORMER_METHODS
        for s in ("identity", "expression")},
-}
-if config.WORLD == 2:
-    # Issue 27: the label-conditional denoiser of classifier-free guidance (tasks.label_control(guidance="cfg")).
-    SHIPPED["denoiser_coma_cfg"] = ("denoiser", {"conditional": True})
     # Issue 25: Table 5 over three training seeds for ours, ours without attention and S2D (seed 0 is above).
-    SHIPPED.update({f"deform_{m}_{s}_seed{k}": ("deformer", {"method": m, "split": s, "seed": k})
-                    for m in ("ours", "no_attention", "s2d") for s in ("identity", "expression") for k in (1, 2)})
+    **{f"deform_{m}_{s}_seed{k}": ("deformer", {"method": m, "split": s, "seed": k})
+       for m in ("ours", "no_attention", "s2d") for s in ("identity", "expression") for k in (1, 2)},
+    # Issue 27: the label-conditional denoiser of classifier-free guidance (tasks.label_control(guidance="cfg")).
+    "denoiser_coma_cfg": ("denoiser", {"conditional": True}),
     # Issue 28: the noisy AU-intensity regressor of AU-curve control (the fine-control chapter).
-    SHIPPED["au_regressor_coma"] = ("au_regressor", {})
+    "au_regressor_coma": ("au_regressor", {}),
+}
