@@ -1,4 +1,5 @@
 """The command line: python -m facelib data|train|sample TASK|neutral|animate."""
+import functools
 import json
 
 import numpy as np
@@ -6,7 +7,7 @@ import pytest
 import torch
 import trimesh
 
-from facelib import __main__ as cli, cli_sample, config, meshio as io, tasks
+from facelib import __main__ as cli, config, meshio as io, tasks
 from facelib.__main__ import main
 from facelib.face import template as tpl
 
@@ -223,7 +224,8 @@ def test_cli_keyframes_and_au_curves(tmp_path, coma_test, capsys, monkeypatch):
     with pytest.raises(SystemExit):
         main(["sample", "keyframes", "--constraints", str(keys), "--out", str(out)])
     assert "integer in 0..39" in capsys.readouterr().err and not out.exists()  # nothing written on failure
-    monkeypatch.setitem(cli_sample.GUIDES, "au", "au_regressor_{}_absent")  # a missing regressor: named, with its command
+    absent = functools.partial(tasks.loading.load_au_regressor, name="au_regressor_coma_absent")
+    monkeypatch.setattr(tasks.au, "load_au_regressor", absent)  # a missing regressor: named, with its command
     with pytest.raises(SystemExit):
         main(["sample", "au", "--curve", "AU12:0@0,0.8@20", "--out", str(out)])
     assert "au_regressor_coma_absent not found" in capsys.readouterr().err and not out.exists()
