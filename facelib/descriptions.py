@@ -20,6 +20,8 @@
 """
 from __future__ import annotations
 
+from dataclasses import replace
+
 from .face.aus import AU_DESCRIPTIONS
 from .face.expressions import ALL_LABELS, KIND_NAMES, RECIPES, check_label
 
@@ -59,8 +61,15 @@ ENRICHED_TEMPLATES = {  # split: ((N2E template, E2N template), ...); {x} is a p
     "held_out": (("starting neutral and ending with {x}", "starting with {x} and ending neutral"),),
 }
 
-# sha256 of writers_spec() as the writers saw it: the written texts below describe this world
+# sha256 of writers_spec(WRITERS_RECIPES), the spec as the writers saw it: the written texts below describe
+# this world.  They wrote for version 1 of the world; version 2 (issue 25) raised only the apex ranges of two
+# recipes, with the same action units, which the texts do not name (WRITERS_RECIPES keeps the ranges they saw).
 WRITERS_SPEC_SHA256 = "d2c174fb531e0929f1f5e716b899ab8c2484fe4183a3577bbb069abff277bc28"
+WRITERS_RECIPES = {**RECIPES,
+                   "high_smile": replace(RECIPES["high_smile"], aus=(("AU6", 0.6, 1.0), ("AU12L", 0.8, 1.0),
+                                                                     ("AU12R", 0.8, 1.0), ("AU25", 0.3, 0.7),
+                                                                     ("AU26", 0.0, 0.2))),
+                   "mouth_open": replace(RECIPES["mouth_open"], aus=(("AU25", 0.6, 1.0), ("AU26", 0.5, 0.8)))}
 
 WRITTEN_VOCABULARY = {  # label: phrasings, as the first blind writer wrote them
     "bareteeth": ("all the teeth showing", "a toothy grimace", "a teeth-showing face", "front teeth exposed",
@@ -224,9 +233,11 @@ def descriptions(label, kind, split="train"):
     return phrasings(label, split) + enriched_texts(label, kind, split)
 
 
-def writers_spec():
+def writers_spec(recipes=None):
     """What the blind writers of the "vocabulary" and "blind_held_out" texts were shown: each label,
-    its raw text and the action units the synthetic world moves for it (markdown)."""
+    its raw text and the action units the synthetic world moves for it (markdown), from ``recipes``
+    (default: the world's, face.RECIPES; WRITERS_RECIPES: as the writers saw them)."""
+    recipes = RECIPES if recipes is None else recipes
     lines = ["# The 18 facial actions of the synthetic face world", "",
              "Each label is one facial action performed by a subject. The first 12 are CoMA-style instructions (a "
              "person is asked to make a face), the last 6 are the basic emotions of BU-4DFE. For each: the label's "
@@ -236,8 +247,8 @@ def writers_spec():
     def aus(ranges):
         return ", ".join(f"{n} {AU_DESCRIPTIONS[n]} ({lo:g}-{hi:g})" for n, lo, hi in ranges)
     for label in ALL_LABELS:
-        lines.append(f"- `{label}` (raw text: \"{raw_text(label)}\"): {aus(RECIPES[label].aus)}")
-        lines += [f"  - variant, for {int(p * 100)} % of subjects: {aus(v)}" for p, v in RECIPES[label].variants]
+        lines.append(f"- `{label}` (raw text: \"{raw_text(label)}\"): {aus(recipes[label].aus)}")
+        lines += [f"  - variant, for {int(p * 100)} % of subjects: {aus(v)}" for p, v in recipes[label].variants]
     lines += ["", "Sequences are either N2E (from the neutral face to the expression's apex) or E2N (from the apex "
               "back to the neutral face)."]
     return "\n".join(lines)

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import torch
 
-from facelib import deformation, training
+from facelib import config, deformation, training
 from facelib.face import template as tpl
 from facelib.models import coma, deformer
 
@@ -84,7 +84,8 @@ def test_pairs_are_consistent_with_the_landmarks(test_pairs):
 
 def test_splits_hold_out_subjects_or_expressions():
     train, test = deformation.split_datasets("identity")
-    assert not set(train.subjects) & set(test.subjects) and len(set(test.subjects)) == 3
+    held_out_faces = sum(config.DATASETS[d].num_test_subjects for d in config.DEFORMATION_DATASET.split("+"))
+    assert not set(train.subjects) & set(test.subjects) and len(set(test.subjects)) == held_out_faces
     train, test = deformation.split_datasets("expression")
     held = {train.label_names.index(y) for y in deformation.HELD_OUT_EXPRESSIONS}
     assert set(test.labels) == held and not held & set(train.labels)

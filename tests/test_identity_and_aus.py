@@ -47,9 +47,9 @@ def test_expression_of_a_subset_matches_the_full_mesh():
 
 
 def test_every_au_moves_the_landmarks_and_depends_on_identity():
-    for name in AU_NAMES:
+    for name in AU_NAMES:  # the blink least: the lids of every face meet (chapter 01)
         rel = measures.identity_dependence(name, num_pairs=6, seed=2)
-        assert rel.mean() >= 0.2, name
+        assert rel.mean() >= (0.05 if name == "AU45" else 0.2), name
     f = Face(sample_identity(7))
     for name in AU_NAMES:
         d = f.landmarks(au_vector(**{name: 1.0})) - f.landmarks(np.zeros(NUM_AUS))

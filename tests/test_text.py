@@ -100,9 +100,14 @@ def test_written_blind_sets_keep_held_out_phrasings_held_out():
     assert "furious" in descriptions.dropped("vocabulary")["anger"]  # written by both: stays held out
     first = descriptions.WRITTEN_BLIND_HELD_OUT_TEMPLATES[0][1].format(x=descriptions.phrasings("sad", "blind_held_out")[0])
     assert descriptions.enriched_texts("sad", "E2N", "blind_held_out")[0] == first
-    spec = descriptions.writers_spec()
+    spec = descriptions.writers_spec(descriptions.WRITERS_RECIPES)
     # the spec the writers saw: if the world's recipes change, the written texts describe another world
     assert hashlib.sha256(spec.encode()).hexdigest() == descriptions.WRITERS_SPEC_SHA256
+    for y, seen in descriptions.WRITERS_RECIPES.items():  # since then only apex ranges changed, same AUs
+        now = descriptions.RECIPES[y]
+        assert [a[0] for a in seen.aus] == [a[0] for a in now.aus] and seen.variants == now.variants
+    changed = [y for y in ALL_LABELS if descriptions.WRITERS_RECIPES[y] != descriptions.RECIPES[y]]
+    assert changed == ["high_smile", "mouth_open"] and descriptions.writers_spec() != spec
     assert all(f"`{y}`" in spec for y in ALL_LABELS) and "AU9 nose wrinkler" in spec
     assert not any(p in spec for y in ALL_LABELS for p in descriptions.phrasings(y, "held_out"))
     with pytest.raises(ValueError, match="only the written splits"):
