@@ -612,6 +612,7 @@ class Fill(Sampling):
 
 
 KEYFRAME_METHODS = ("replace", "reconstruction", "both")
+KEYFRAME_TOLERANCE = 0.5  # mm, our choice (issue 28): a key counts as met within this distance (and no jump)
 
 
 @dataclass(frozen=True)

@@ -20,6 +20,7 @@ import torch
 
 from . import data, metrics
 from .checkpoints import load_checkpoint
+from .face.aus import AU_NAMES
 from .models.classifier import LSTMClassifier
 
 
@@ -146,14 +147,22 @@ def accuracy_by_noise(classifier, denoiser, dataset, t_grid, classifier_type="I"
 
 
 @torch.no_grad()
-def au_error_by_noise(regressor, denoiser, dataset, t_grid, seed=0):
+def au_error_by_noise(regressor, denoiser, dataset, t_grid, seed=0, active=None, aus=None):
     """Mean absolute error (intensity units) of a noisy AU regressor R(x_t, t) (AU-curve control) on
     ``dataset``'s sequences noised to each step of ``t_grid`` with Eq. 3, against the AU curves that made
-    them, over every frame and AU; one fresh draw of noise per sequence and step."""
+    them, over every frame and AU; one fresh draw of noise per sequence and step.  ``aus``: only these AUs
+    (names of ``face.aus.AU_NAMES``); ``active``: only the entries where the true intensity exceeds it (the
+    frames where an AU acts; most entries are 0, which predicting no AU at all gets right)."""
     x0 = torch.as_tensor(denoiser.normalizer.normalize(dataset.landmarks))
     truth = torch.as_tensor(dataset.au_weights, dtype=torch.float32)
+    unknown = sorted(set(aus or ()) - set(AU_NAMES))
+    if unknown:
+        raise ValueError(f"unknown AUs {unknown}; allowed: {', '.join(AU_NAMES)}")
+    chosen = torch.zeros(len(AU_NAMES), dtype=torch.bool)
+    chosen[[AU_NAMES.index(a) for a in aus or AU_NAMES]] = True
+    counted = chosen & (truth.abs() > active if active is not None else torch.ones_like(truth, dtype=torch.bool))
     generator, errors = torch.Generator().manual_seed(seed), []
     for t in t_grid:
         xt = denoiser.diffusion.q_sample(x0, torch.full((len(x0),), t), generator=generator)
-        errors.append((regressor(xt, torch.full((len(x0),), float(t))) - truth).abs().mean().item())
+        errors.append((regressor(xt, torch.full((len(x0),), float(t))) - truth).abs()[counted].mean().item())
     return errors

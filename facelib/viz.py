@@ -406,7 +406,7 @@ def au_curves_figure(requested, curves, aus, au_names, figsize=None):
     """Requested against obtained action-unit curves (AU-curve control): one panel per AU of ``aus`` (names of
     ``au_names``), the requested curve (``requested``, (F, A)) in black, and each entry of ``curves`` ({label:
     (n, F, A) curves, e.g. the rig fit of guided sequences, of unguided ones, the regressor's reading}) as thin
-    lines of one colour per label.  x: frame, y: intensity.  Returns the figure."""
+    lines of one colour per label, the legend in the last panel.  x: frame, y: intensity.  Returns the figure."""
     requested = np.asarray(requested)
     fig, axes = plt.subplots(1, len(aus), figsize=figsize or (3.2 * len(aus), 2.8), squeeze=False, sharey=True)
     for ax, name in zip(axes[0], aus):
@@ -417,7 +417,7 @@ def au_curves_figure(requested, curves, aus, au_names, figsize=None):
                 ax.plot(seq[:, k], color=f"C{j}", lw=1, alpha=0.8, label=label if i == 0 else None)
         ax.set(title=name, xlabel="frame")
     axes[0, 0].set_ylabel("intensity")
-    axes[0, 0].legend(fontsize=7)
+    axes[0, -1].legend(fontsize=7, loc="upper right")
     fig.tight_layout()
     return fig
 

@@ -4,6 +4,7 @@ import pytest
 import torch
 
 from facelib import data, evaluation, metrics
+from facelib.face.aus import AU_NAMES
 
 
 def test_frechet_distance_matches_the_closed_form_for_gaussians(rng):
@@ -136,3 +137,21 @@ def test_au_error_by_noise_is_zero_for_a_regressor_that_knows_the_answer(denoise
             return truth + 0.25 * (t > 0).float()[:, None, None]  # exact on clean input, 0.25 off on noise
 
     assert evaluation.au_error_by_noise(Oracle(), denoiser, test, [0, 500]) == pytest.approx([0.0, 0.25])
+
+
+def test_au_error_by_noise_counts_only_the_chosen_aus_where_they_act(denoiser):
+    test = data.load_dataset("coma", "test").subset(np.arange(4))
+    truth = torch.as_tensor(test.au_weights, dtype=torch.float32)
+
+    class NoAU(torch.nn.Module):  # predicts no action unit at all
+        def forward(self, xt, t):
+            return torch.zeros_like(truth)
+
+    k = AU_NAMES.index("AU26")
+    on = truth[..., k] > 0.1
+    expected = [truth[..., k][on].mean().item()] * 2  # its error: the intensity itself, where AU26 acts
+    assert evaluation.au_error_by_noise(NoAU(), denoiser, test, [0, 500], active=0.1, aus=["AU26"]) == \
+        pytest.approx(expected)
+    assert evaluation.au_error_by_noise(NoAU(), denoiser, test, [0])[0] == pytest.approx(truth.abs().mean().item())
+    with pytest.raises(ValueError, match="unknown AUs \\['AU99'\\]; allowed: AU1"):
+        evaluation.au_error_by_noise(NoAU(), denoiser, test, [0], aus=["AU99"])

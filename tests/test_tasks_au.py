@@ -116,7 +116,8 @@ def test_au_guidance_off_is_the_same_chain_and_face_with_the_au_score_weighted_z
     face = tasks.unconditional(1, steps=4, seed=1, denoiser=denoiser, progress=False)[0, 0]
     assert tasks.AU_GUIDANCE_OFF == {"au_weight": 0.0}  # one named setting, used by the benchmark and the chapter
     off = tasks.au_control(["AU26:1.0"], 2, face, **kwargs, **tasks.AU_GUIDANCE_OFF)
-    assert np.array_equal(off, tasks.au_control(["AU12:0.5"], 2, face, **kwargs, **tasks.AU_GUIDANCE_OFF))  # no request counts
+    other = tasks.au_control(["AU12:0.5"], 2, face, **kwargs, **tasks.AU_GUIDANCE_OFF)
+    assert np.array_equal(off, other)  # the request counts for nothing
     assert np.array_equal(off[:, 0], np.broadcast_to(face, (2, 68, 3)))  # the same face at frame 0
     on = tasks.au_control(["AU26:1.0"], 2, face, **kwargs)
     assert not np.allclose(off, on)  # with its weight, the AU score moves the sequences
@@ -124,3 +125,15 @@ def test_au_guidance_off_is_the_same_chain_and_face_with_the_au_score_weighted_z
     assert not np.allclose(half, on) and not np.allclose(half, off)
     with pytest.raises(ValueError, match="the AU score's weight must be a non-negative number"):
         tasks.au_control(["AU26:1.0"], 2, face, au_weight=-1.0, **kwargs)
+
+
+def test_regressor_curves_are_what_r_reads_on_clean_sequences(denoiser):
+    torch.manual_seed(0)
+    regressor = tasks.TrainedGuide(AURegressor(AURegressorConfig(width=32, depth=1, heads=2, ff=64)).eval(),
+                                   "coma", "au", AU_NAMES, denoiser.normalizer,
+                                   {"training": {"num_diffusion_steps": 2000}})
+    x = tasks.unconditional(2, steps=4, seed=1, denoiser=denoiser, progress=False)
+    read = tasks.regressor_curves(x, regressor)
+    with torch.no_grad():
+        expected = regressor.model(denoiser.to_model(x).float(), torch.zeros(2)).numpy()
+    assert read.shape == (2, 40, len(AU_NAMES)) and np.allclose(read, expected, atol=1e-6)

@@ -74,3 +74,18 @@ def test_random_keys_are_real_displacements_and_key_speeds_read_the_keyed_frame(
     walk = np.zeros((2, 40, 68, 3))
     walk[:, :, 5, 0] = np.arange(40) * 0.5  # 0.5 mm per frame
     assert tasks.real_speed_p95(walk, 5) == pytest.approx(0.5)
+
+
+def test_a_keyframe_report_meets_a_key_only_when_close_and_without_a_jump():
+    real = np.zeros((2, 40, 68, 3))
+    real[:, :, 54, 1] = np.arange(40) * 0.5  # real corners move 0.5 mm per frame: p95 = 0.5
+    keys = [{"frame": 20, "landmark": 54, "displacement": [0.0, 10.0, 0.0]}]
+    x = np.zeros((3, 40, 68, 3))
+    x[:, :, 54, 1] = np.arange(40) * 0.5  # smooth, 10 mm at frame 20
+    x[1, 20, 54, 1] = 12.0  # off by 2 mm (and a jump)
+    x[2, 20:, 54, 1] += 0.3  # on the key (10.3 mm: within 0.5) but 0.8 mm into the keyed frame
+    report = tasks.keyframe_report(x, [(keys, np.zeros((68, 3)))] * 3, real)
+    assert report["error"] == pytest.approx([0.0, 2.0, 0.3]) and report["met"].tolist() == [True, False, False]
+    assert report["speed_ratio"] == pytest.approx([1.0, 5.0, 1.6])
+    with pytest.raises(ValueError, match="one sequence per request"):
+        tasks.keyframe_report(x[:2], [(keys, None)] * 3, real)

@@ -109,7 +109,7 @@ def test_au_curves_figure_draws_the_request_and_each_sequence_per_au():
     smile, brow = fig.axes
     assert smile.get_title() == "AU12L" and brow.get_title() == "AU2" and len(smile.lines) == 1 + 2 + 1
     assert smile.lines[0].get_ydata()[-1] == pytest.approx(0.8) and list(smile.lines[3].get_ydata()[:2]) == [0.3, 0.3]
-    assert [t.get_text() for t in smile.get_legend().get_texts()] == ["requested", "rig fit", "R reads"]
+    assert [t.get_text() for t in brow.get_legend().get_texts()] == ["requested", "rig fit", "R reads"]
     plt.close(fig)
 
 

@@ -162,6 +162,15 @@ def fitted_curves(sequences, faces=None):
     return np.stack([rig_fit.fit_aus(face, s) for face, s in zip(faces, x)])
 
 
+@torch.no_grad()
+def regressor_curves(sequences, regressor=None, dataset="coma"):
+    """The AU curves (n, F, A) that the AU regressor R reads on sequences (n, F, 68, 3) in mm taken as clean
+    (t = 0): what AU-curve guidance climbs towards, as opposed to :func:`fitted_curves`, what the rig shows."""
+    regressor = regressor or load_au_regressor(dataset)
+    x = torch.as_tensor(regressor.normalizer.normalize(np.asarray(sequences)), dtype=torch.float32)
+    return regressor.model(x, torch.zeros(len(x))).numpy()
+
+
 def fit_floor(dataset="coma", n=30, active=0.1):
     """{AU: mean absolute error of the rig fit on real test sequences of ``dataset`` with their own faces, over
     the entries where the AU is active (above ``active``)}: what the measurement of AU-curve control cannot

@@ -23,7 +23,7 @@ import numpy as np
 import torch
 
 from .. import data
-from ..config import Keyframes
+from ..config import KEYFRAME_TOLERANCE, Keyframes
 from ..guidance import ReconstructionGuidance
 from ..inpainting import KnownFrames
 from .fill import known_noise
@@ -151,3 +151,20 @@ def real_speed_p95(sequences, landmark):
     """The 95th percentile of a landmark's frame-to-frame motion (mm/frame) over real sequences (n, F, 68, 3)."""
     x = np.asarray(sequences, dtype=np.float64)[:, :, landmark]
     return float(np.percentile(np.linalg.norm(np.diff(x, axis=1), axis=-1), 95))
+
+
+def keyframe_report(sequences, requests, real, tolerance=KEYFRAME_TOLERANCE):
+    """How well sequences (n, F, 68, 3) meet n requests [(keys, neutral or None)], one sequence each:
+    {"error": the largest key error of each (mm), "speed_ratio": the largest speed into or out of a keyed frame
+    over the 95th percentile of that landmark's speed in ``real`` sequences, "met": error within ``tolerance``
+    and no ratio above 1}, each an array (n,)."""
+    x = np.asarray(sequences, dtype=np.float64)
+    if len(x) != len(requests):
+        raise ValueError(f"give one sequence per request ({len(requests)}), got {len(x)}")
+    p95 = {l: real_speed_p95(real, l) for l in {key["landmark"] for keys, _ in requests for key in keys}}
+    error, ratio = np.zeros(len(x)), np.zeros(len(x))
+    for k, (keys, neutral) in enumerate(requests):
+        limits = [p95[key["landmark"]] for key in keys]
+        error[k] = key_errors(x[k:k + 1], keys, neutral).max()
+        ratio[k] = (key_speeds(x[k:k + 1], keys)[0] / limits).max()
+    return {"error": error, "speed_ratio": ratio, "met": (error <= tolerance) & (ratio <= 1)}
