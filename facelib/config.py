@@ -14,9 +14,10 @@ PROJECT_ROOT = Path(__file__).resolve().parent.parent
 DATA_DIR = PROJECT_ROOT / "data"
 
 # The synthetic world's version.  Version 2 (issue 25; facelib/face/tissue.py: tissue mechanics, magnitudes
-# calibrated to published measurements of real faces) replaced version 1, whose faces moved two to four times
-# less than real ones.  Every dataset, checkpoint and stored result records the version it was made on; a
-# checkpoint of another version is refused with the command that retrains it (checkpoints.check_world).
+# calibrated to published measurements of real faces) replaced version 1, whose faces moved far less than
+# real ones.  The dataset caches are named after the version, and every checkpoint records it with the
+# datasets' fingerprint: one of another version is refused with the command that retrains it
+# (checkpoints.check_world), and a stored result whose checkpoints changed is flagged stale (tests/test_results.py).
 # ``face.Face(..., world=1)`` remains only for chapter 01's comparison of the two versions (WORLDS).
 WORLD = 2
 WORLDS = (1, 2)
