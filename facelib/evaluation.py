@@ -151,16 +151,25 @@ def au_error_by_noise(regressor, denoiser, dataset, t_grid, seed=0, active=None,
     """Mean absolute error (intensity units) of a noisy AU regressor R(x_t, t) (AU-curve control) on
     ``dataset``'s sequences noised to each step of ``t_grid`` with Eq. 3, against the AU curves that made
     them, over every frame and AU; one fresh draw of noise per sequence and step.  ``aus``: only these AUs
-    (names of ``face.aus.AU_NAMES``); ``active``: only the entries where the true intensity exceeds it (the
-    frames where an AU acts; most entries are 0, which predicting no AU at all gets right)."""
+    (a non-empty list of names of ``face.aus.AU_NAMES``; None: all); ``active``: only the entries where the
+    true |intensity| exceeds it (a number >= 0: the frames where an AU acts; most entries are 0, which
+    predicting no AU at all gets right).  A ValueError when no entry is counted."""
+    if aus is not None:
+        if isinstance(aus, str) or not isinstance(aus, (list, tuple)) or not aus:
+            raise ValueError(f"aus must be a non-empty list of AU names (e.g. ['AU26']) or None for all, got {aus!r}")
+        unknown = sorted(set(aus) - set(AU_NAMES))
+        if unknown:
+            raise ValueError(f"aus: unknown AUs {unknown}; allowed: {', '.join(AU_NAMES)}")
+    if active is not None and (isinstance(active, bool) or not isinstance(active, (int, float))
+                               or not 0 <= active < np.inf):
+        raise ValueError(f"active must be None (every entry) or an intensity >= 0, got {active!r}")
     x0 = torch.as_tensor(denoiser.normalizer.normalize(dataset.landmarks))
     truth = torch.as_tensor(dataset.au_weights, dtype=torch.float32)
-    unknown = sorted(set(aus or ()) - set(AU_NAMES))
-    if unknown:
-        raise ValueError(f"unknown AUs {unknown}; allowed: {', '.join(AU_NAMES)}")
     chosen = torch.zeros(len(AU_NAMES), dtype=torch.bool)
-    chosen[[AU_NAMES.index(a) for a in aus or AU_NAMES]] = True
+    chosen[[AU_NAMES.index(a) for a in (AU_NAMES if aus is None else aus)]] = True
     counted = chosen & (truth.abs() > active if active is not None else torch.ones_like(truth, dtype=torch.bool))
+    if not counted.any():
+        raise ValueError(f"no entry to count: none of aus={aus!r} exceeds active={active!r} in these sequences")
     generator, errors = torch.Generator().manual_seed(seed), []
     for t in t_grid:
         xt = denoiser.diffusion.q_sample(x0, torch.full((len(x0),), t), generator=generator)

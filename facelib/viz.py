@@ -402,43 +402,66 @@ def confusion_figure(counts, class_names, title="", figsize=(6.5, 5.5)):
     return fig
 
 
-def au_curves_figure(requested, curves, aus, au_names, figsize=None):
+def au_curves_figure(requested, curves, aus, au_names, mask=None, figsize=None):
     """Requested against obtained action-unit curves (AU-curve control): one panel per AU of ``aus`` (names of
-    ``au_names``), the requested curve (``requested``, (F, A)) in black, and each entry of ``curves`` ({label:
-    (n, F, A) curves, e.g. the rig fit of guided sequences, of unguided ones, the regressor's reading}) as thin
-    lines of one colour per label, the legend in the last panel.  x: frame, y: intensity.  Returns the figure."""
-    requested = np.asarray(requested)
+    ``au_names``), the requested curve (``requested``, (F, A)) dashed in black where ``mask`` ((F, A) bool, the
+    request's constrained entries; None: every entry) is True, and each entry of ``curves`` ({label: (n, F, A)
+    curves, e.g. the rig fit of guided sequences, of unguided ones, the regressor's reading}) as thin lines of
+    one colour per label; a panel of an AU the request leaves free says so in its title.  The legend is in the
+    last panel.  x: frame, y: intensity.  Returns the figure."""
+    requested = np.asarray(requested, dtype=float)
+    mask = np.ones(requested.shape, dtype=bool) if mask is None else np.asarray(mask)
+    if mask.shape != requested.shape or mask.dtype != bool:
+        raise ValueError(f"mask must be a bool array of the request's shape {requested.shape}, got "
+                         f"{mask.dtype} {mask.shape}")
+    unknown = [a for a in aus if a not in au_names]
+    if unknown:
+        raise ValueError(f"aus: unknown AUs {unknown}; allowed: {', '.join(au_names)}")
     fig, axes = plt.subplots(1, len(aus), figsize=figsize or (3.2 * len(aus), 2.8), squeeze=False, sharey=True)
+    handles = {}
     for ax, name in zip(axes[0], aus):
         k = au_names.index(name)
-        ax.plot(requested[:, k], "k--", lw=2, label="requested")
+        if mask[:, k].any():
+            handles["requested"] = ax.plot(np.where(mask[:, k], requested[:, k], np.nan), "k--", lw=2)[0]
         for j, (label, c) in enumerate(curves.items()):
-            for i, seq in enumerate(np.asarray(c)):
-                ax.plot(seq[:, k], color=f"C{j}", lw=1, alpha=0.8, label=label if i == 0 else None)
-        ax.set(title=name, xlabel="frame")
+            for seq in np.asarray(c):
+                handles[label] = ax.plot(seq[:, k], color=f"C{j}", lw=1, alpha=0.8)[0]
+        ax.set(title=name if mask[:, k].any() else f"{name} (free)", xlabel="frame")
     axes[0, 0].set_ylabel("intensity")
-    axes[0, -1].legend(fontsize=7, loc="upper right")
+    order = ["requested", *curves] if "requested" in handles else list(curves)
+    axes[0, -1].legend([handles[h] for h in order], order, fontsize=7, loc="upper right")
     fig.tight_layout()
     return fig
 
 
 def keyframe_figure(sequences, key, neutral, p95, figsize=(9.5, 3.0)):
-    """One landmark keyframe ``key`` (frame, landmark, displacement from ``neutral`` (68, 3)) met by several
-    methods, ``sequences`` ({method: (n, F, 68, 3) in mm}).  Left: the keyed landmark's displacement from the
-    neutral face along the key's direction (mm), the key a star; right: its frame-to-frame speed (mm/frame)
-    with the real 95th percentile ``p95`` dashed.  Returns the figure."""
-    f, l, target = key["frame"], key["landmark"], np.asarray(key["displacement"], dtype=float)
-    direction = target / np.linalg.norm(target)
+    """One landmark keyframe ``key`` (frame, landmark and a ``displacement`` from ``neutral`` (68, 3) or a
+    ``position``, mm) met by several methods, ``sequences`` ({method: (n, F, 68, 3) in mm}).  Left: the keyed
+    landmark's displacement from the neutral face along the key's direction (mm; for a key at the neutral
+    position itself, its distance from there), the key a star; right: its frame-to-frame speed (mm/frame) with
+    the real 95th percentile ``p95`` dashed.  Returns the figure."""
+    neutral = np.asarray(neutral, dtype=float)
+    targets = [k for k in ("position", "displacement") if isinstance(key, dict) and k in key]
+    if neutral.shape != (68, 3) or not np.isfinite(neutral).all():
+        raise ValueError(f"neutral must be finite landmarks (68, 3) in mm, got shape {neutral.shape}")
+    if len(targets) != 1 or not {"frame", "landmark"} <= set(key):
+        raise ValueError(f"key needs 'frame', 'landmark' and one of 'position' or 'displacement', got {key!r}")
+    f, l = key["frame"], key["landmark"]
+    target = np.asarray(key[targets[0]], dtype=float) - (neutral[l] if targets[0] == "position" else 0.0)
+    distance = float(np.linalg.norm(target))
     fig, (ax, bx) = plt.subplots(1, 2, figsize=figsize)
     for j, (method, x) in enumerate(sequences.items()):
         path = np.asarray(x, dtype=float)[:, :, l]
-        along, speed = (path - neutral[l]) @ direction, np.linalg.norm(np.diff(path, axis=1), axis=-1)
+        moved = path - neutral[l]
+        along = moved @ (target / distance) if distance > 0 else np.linalg.norm(moved, axis=-1)
+        speed = np.linalg.norm(np.diff(path, axis=1), axis=-1)
         for i in range(len(path)):
             ax.plot(along[i], color=f"C{j}", lw=1, label=method if i == 0 else None)
             bx.plot(np.arange(1, path.shape[1]) - 0.5, speed[i], color=f"C{j}", lw=1)
-    ax.plot([f], [np.linalg.norm(target)], "k*", ms=12, label=f"key (frame {f})")
+    ax.plot([f], [distance], "k*", ms=12, label=f"key (frame {f})")
     bx.axhline(p95, color="k", ls="--", lw=1, label="real 95th percentile")
-    ax.set(xlabel="frame", ylabel=f"landmark {l}: displacement (mm)")
+    what = "displacement along the key" if distance > 0 else "distance from neutral"
+    ax.set(xlabel="frame", ylabel=f"landmark {l}: {what} (mm)")
     bx.set(xlabel="frame", ylabel="speed (mm/frame)")
     ax.legend(fontsize=7)
     bx.legend(fontsize=7)

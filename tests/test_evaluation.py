@@ -155,3 +155,22 @@ def test_au_error_by_noise_counts_only_the_chosen_aus_where_they_act(denoiser):
     assert evaluation.au_error_by_noise(NoAU(), denoiser, test, [0])[0] == pytest.approx(truth.abs().mean().item())
     with pytest.raises(ValueError, match="unknown AUs \\['AU99'\\]; allowed: AU1"):
         evaluation.au_error_by_noise(NoAU(), denoiser, test, [0], aus=["AU99"])
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    (dict(aus=[]), "aus must be a non-empty list of AU names"),
+    (dict(aus="AU26"), "aus must be a non-empty list of AU names .* got 'AU26'"),
+    (dict(active=-0.1), "active must be None .* or an intensity >= 0, got -0.1"),
+    (dict(active="0.1"), "active must be None"),
+    (dict(active=float("nan")), "active must be None"),
+    (dict(active=10.0, aus=["AU26"]), "no entry to count: none of aus=\\['AU26'\\] exceeds active=10.0"),
+])
+def test_au_error_by_noise_refuses_bad_or_empty_selections(denoiser, kwargs, message):
+    test = data.load_dataset("coma", "test").subset(np.arange(4))
+
+    class NoAU(torch.nn.Module):
+        def forward(self, xt, t):
+            return torch.zeros(xt.shape[:2] + (len(AU_NAMES),))
+
+    with pytest.raises(ValueError, match=message):
+        evaluation.au_error_by_noise(NoAU(), denoiser, test, [0], **kwargs)

@@ -107,6 +107,30 @@ def test_random_requests_stay_in_the_data_and_fitted_requests_score_zero():
     assert pairs and all(a in AU_NAMES and b in AU_NAMES for a, b in pairs)
 
 
+def test_active_aus_reads_signed_aus_by_their_size_and_never_together_uses_it():
+    w = np.zeros((2, 40, len(AU_NAMES)))
+    w[0, 5, AU_NAMES.index("AD30")] = -0.5  # the jaw sideways, to the other side: active
+    w[1, 5, AU_NAMES.index("AU2")] = 0.2  # at the threshold: not active
+    on = tasks.au.active_aus(w)
+    assert on[0, AU_NAMES.index("AD30")] and on.sum() == 1
+    assert tasks.au.active_aus(w, active=0.1).sum() == 2
+    with pytest.raises(ValueError, match="au_weights must be AU curves"):
+        tasks.au.active_aus(w[0])
+    with pytest.raises(ValueError, match="active must be an intensity >= 0"):
+        tasks.au.active_aus(w, active=-1)
+
+
+def test_random_requests_peak_where_their_settings_say_and_name_their_aus():
+    requests = tasks.random_requests(20, seed=0, aus=["AU2", "AU26"], low=0.4, high=0.6, peak_frames=(12, 14))
+    for (spec,) in requests:
+        keys = [k.split("@") for k in spec.split(":")[1].split(",")]
+        assert 0.4 <= float(keys[1][0]) <= 0.6 and 12 <= int(keys[1][1]) <= 14 and keys[2][1] == "39"
+    assert tasks.au.requested_aus(requests) == ["AU2", "AU26"]
+    assert tasks.au.requested_aus([["AU12:0", "AU1:0.5"]]) == ["AU1", "AU12L", "AU12R"]
+    with pytest.raises(ValueError, match="peak_frames must be"):
+        tasks.random_requests(1, peak_frames=(0, 39))
+
+
 def test_au_guidance_off_is_the_same_chain_and_face_with_the_au_score_weighted_zero(denoiser):
     torch.manual_seed(0)
     regressor = tasks.TrainedGuide(AURegressor(AURegressorConfig(width=32, depth=1, heads=2, ff=64)).eval(),

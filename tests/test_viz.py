@@ -113,6 +113,36 @@ def test_au_curves_figure_draws_the_request_and_each_sequence_per_au():
     plt.close(fig)
 
 
+def test_au_curves_figure_draws_the_request_only_where_it_constrains():
+    names = ("AU1", "AU2", "AU12L")
+    requested, mask = np.zeros((40, 3)), np.zeros((40, 3), dtype=bool)
+    mask[:, 2] = True  # AU12L constrained (to 0), AU2 free
+    fig = viz.au_curves_figure(requested, {"rig fit": np.full((1, 40, 3), 0.5)}, ["AU12L", "AU2"], names, mask)
+    smile, brow = fig.axes
+    assert len(smile.lines) == 2 and list(smile.lines[0].get_ydata()[:2]) == [0.0, 0.0]
+    assert len(brow.lines) == 1 and brow.get_title() == "AU2 (free)"  # no requested 0-line for a free AU
+    assert [t.get_text() for t in brow.get_legend().get_texts()] == ["requested", "rig fit"]
+    with pytest.raises(ValueError, match="mask must be a bool array of the request's shape"):
+        viz.au_curves_figure(requested, {}, ["AU2"], names, mask[:10])
+    plt.close("all")
+
+
+def test_keyframe_figure_takes_a_position_or_a_zero_displacement():
+    neutral = np.zeros((68, 3))
+    neutral[54] = [10.0, 0.0, 0.0]
+    x = np.broadcast_to(neutral, (1, 40, 68, 3)).copy()
+    x[0, :, 54, 1] = np.minimum(np.arange(40), 8)
+    by_position = viz.keyframe_figure({"both": x}, {"frame": 25, "landmark": 54, "position": [10.0, 8.0, 0.0]},
+                                      neutral, p95=0.7)
+    assert by_position.axes[0].lines[1].get_ydata()[0] == pytest.approx(8.0)  # the star: 8 mm from neutral
+    assert list(by_position.axes[0].lines[0].get_ydata()[[0, 5, 30]]) == [0.0, 5.0, 8.0]
+    held = viz.keyframe_figure({"both": x}, {"frame": 0, "landmark": 54, "displacement": [0, 0, 0]}, neutral, 0.7)
+    assert held.axes[0].lines[1].get_ydata()[0] == 0.0 and held.axes[0].lines[0].get_ydata()[5] == 5.0
+    with pytest.raises(ValueError, match="one of 'position' or 'displacement'"):
+        viz.keyframe_figure({"both": x}, {"frame": 0, "landmark": 54}, neutral, 0.7)
+    plt.close("all")
+
+
 def test_keyframe_figure_plots_the_displacement_along_the_key_and_the_speed():
     neutral = np.zeros((68, 3))
     x = np.zeros((1, 40, 68, 3))

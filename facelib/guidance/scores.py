@@ -76,9 +76,9 @@ class CosineScore(_ChainScore):
 
 @dataclass
 class AUCurveScore(_ChainScore):
-    """score(x, t) = -sum over the constrained (frame, AU) of (R(x, t) - c)^2 / (2 tau^2) (B,): the Gaussian
-    log-likelihood (up to a constant) of requested AU curves c (n, F, A) under the AU regressor R, where
-    ``constrained`` (n, F, A) is True (AUs a request leaves free do not count).
+    """score(x, t) = -weight * sum over the constrained (frame, AU) of (R(x, t) - c)^2 / (2 tau^2) (B,): ``weight``
+    times the Gaussian log-likelihood (up to a constant) of requested AU curves c (n, F, A) under the AU regressor
+    R, where ``constrained`` (n, F, A) is True (AUs a request leaves free do not count).
 
     With a ``denoiser`` (and the chain's ``diffusion``, see :meth:`for_chain`), R reads the denoiser's estimate
     x0_hat(x, t) at time 0 instead of x (as :class:`DenoisedCosineScore` for text): the gradient then reaches x

@@ -16,8 +16,9 @@ task's frozen dataclass in facelib/config.py (the book's recommended values; ``.
 printed algorithm, ``.fast()`` a few steps) and ``overrides`` change single fields, e.g.
 ``tasks.label_control("high_smile", 16, steps=100)``.
 """
-from .au import (AU_GUIDANCE_OFF, au_control, curve_errors, data_ranges, fit_floor, fitted_curves, measurable_aus,
-                 never_together, parse_curve, random_requests, regressor_curves, requested_curves)
+from .au import (AU_GUIDANCE_OFF, active_aus, au_control, curve_errors, data_ranges, fit_floor, fitted_curves,
+                 measurable_aus, never_together, parse_curve, random_requests, regressor_curves, requested_aus,
+                 requested_curves)
 from .decoder import decoder_then_diffusion
 from .edit import check_sequences, edit, invert, keep_on_path
 from .fill import fill

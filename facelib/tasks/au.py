@@ -14,7 +14,8 @@ import numpy as np
 import torch
 
 from .. import data, rig_fit
-from ..config import AU_CURVE_LR, AU_MEASURABLE_FIT_ERROR, AUControl
+from ..config import (AU_ACTIVE, AU_CURVE_LR, AU_MEASURABLE_FIT_ERROR, AU_REQUEST_PEAK, AU_REQUEST_PEAK_FRAMES,
+                      AUControl)
 from ..face.aus import AU_NAMES
 from ..guidance import AUCurveScore, MeanShiftGuidance, OptimisationGuidance, ReconstructionGuidance, chain
 from ..inpainting import KnownFrames, keep_known
@@ -202,29 +203,55 @@ def curve_errors(fitted, requests, num_frames=40):
     return np.array(out)
 
 
-def never_together(dataset="coma", active=0.2):
+def active_aus(au_weights, active=AU_ACTIVE):
+    """The AUs each sequence activates, (n, A) bool, for AU curves ``au_weights`` (n, F, A): |intensity| above
+    ``active`` at some frame (the absolute value: the AD AUs, e.g. AD30's jaw sideways, are signed)."""
+    w = np.asarray(au_weights)
+    if w.ndim != 3 or w.shape[-1] != len(AU_NAMES):
+        raise ValueError(f"au_weights must be AU curves (n, F, {len(AU_NAMES)}), got shape {w.shape}")
+    if isinstance(active, bool) or not isinstance(active, (int, float)) or not 0 <= active < np.inf:
+        raise ValueError(f"active must be an intensity >= 0, got {active!r}")
+    return (np.abs(w) > active).any(1)
+
+
+def never_together(dataset="coma", active=AU_ACTIVE):
     """The pairs of AUs (names) that no training sequence of ``dataset`` activates together (both above
-    ``active`` at some frame of the same sequence), among the AUs the data activate at all."""
-    w = data.load_dataset(dataset, "train").au_weights
-    on = (np.abs(w) > active).any(1)  # (n, A): the AUs each sequence activates
+    ``active`` at some frame of the same sequence, :func:`active_aus`), among the AUs the data activate at all."""
+    on = active_aus(data.load_dataset(dataset, "train").au_weights, active)  # (n, A)
     used = np.flatnonzero(on.any(0))
     return [(AU_NAMES[a], AU_NAMES[b]) for i, a in enumerate(used) for b in used[i + 1:]
             if not (on[:, a] & on[:, b]).any()]
 
 
-def random_requests(n, seed=0, dataset="coma", aus=None, pairs=None, low=0.3):
+def random_requests(n, seed=0, dataset="coma", aus=None, pairs=None, low=AU_REQUEST_PEAK[0],
+                    high=AU_REQUEST_PEAK[1], peak_frames=AU_REQUEST_PEAK_FRAMES, num_frames=40):
     """n random requests within the data's range: one AU (of ``aus``; default, every AU the data push to at
-    least 0.5) or one pair of ``pairs``, each a curve from 0 at frame 0 up to a peak in [low, the data's
-    highest, at most 1] at a frame in 10..25, then to a value between 0 and the peak at frame 39."""
+    least 0.5) or one pair of ``pairs``, each a curve from 0 at frame 0 up to a peak in [low, min(high, the
+    data's highest)] at a frame in ``peak_frames`` (first, last), then to a value between 0 and the peak at the
+    last frame."""
     rng = np.random.default_rng(seed)
     ranges = data_ranges(dataset)
     aus = aus or [a for a in AU_NAMES if ranges[a][1] >= 0.5 and a != "AU45"]
+    first, last = peak_frames
+    if not 0 < first <= last < num_frames - 1:
+        raise ValueError(f"peak_frames must be (first, last) with 0 < first <= last < {num_frames - 1}, "
+                         f"got {peak_frames!r}")
     requests = []
     for _ in range(n):
         chosen = pairs[rng.integers(len(pairs))] if pairs else (aus[rng.integers(len(aus))],)
         request = []
         for a in chosen:
-            peak = rng.uniform(low, min(1.0, ranges[a][1]))
-            request.append(f"{a}:0@0,{peak:.2f}@{rng.integers(10, 26)},{rng.uniform(0, peak):.2f}@39")
+            peak = rng.uniform(low, min(high, ranges[a][1]))
+            request.append(f"{a}:0@0,{peak:.2f}@{rng.integers(first, last + 1)},{rng.uniform(0, peak):.2f}"
+                           f"@{num_frames - 1}")
         requests.append(request)
     return requests
+
+
+def requested_aus(requests):
+    """The AUs (names, in the order of ``face.aus.AU_NAMES``) that a list of requests constrains."""
+    used = set()
+    for request in requests:
+        for spec in request:
+            used.update(au_names_of(spec.split(":")[0].strip()))
+    return [a for a in AU_NAMES if a in used]
