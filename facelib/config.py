@@ -61,9 +61,9 @@ DATASETS = {
     # instructions ("lips up") that subjects interpret freely: our choice of a wide style spread
     # makes them as hard to recognise on unseen subjects as the paper's GT row (83.8 %).  World 2's
     # broad, saturating expressions blur the labels into each other more than world 1's did (the IC read
-    # 76 % with a blend of 0.3): mixing at most 0.22 of another label in keeps the ground truth near 83.8 %.  Our choice: 4 takes
-    # per (subject, label) plus one extra take for 113 random pairs gives exactly 689; 3 subjects
-    # (a quarter) are held out for testing.
+    # 76 % with a blend of 0.3): mixing at most 0.22 of another label in keeps the ground truth near
+    # 83.8 %.  Our choice: 4 takes per (subject, label) plus one extra take for 113 random pairs gives
+    # exactly 689; 3 subjects (a quarter) are held out for testing.
     "coma": DatasetSpec("coma", "coma", num_subjects=12, num_sequences=689, num_test_subjects=3,
                         takes_per_pair=4, seed=1001, style_gain_sigma=0.45, style_leak_probability=0.9,
                         style_leak_max=0.4, style_blend_max=0.22),
