@@ -27,6 +27,8 @@ is called with the chain's step and receives its own time label, ``timesteps[t]`
 """
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import torch
 from tqdm import tqdm
@@ -71,19 +73,30 @@ def _extract(array, t, x):
     return values.reshape(values.shape + (1,) * (x.ndim - values.ndim))
 
 
+def _device_of(network):
+    """The device of a module's first parameter or buffer (None for a plain function or an empty module)."""
+    if isinstance(network, torch.nn.Module):
+        for tensor in itertools.chain(network.parameters(), network.buffers()):
+            return tensor.device
+    return None
+
+
 class TimeMapped(torch.nn.Module):
     """A network seen through a (respaced) chain: called as ``net(x, t, ...)``, ``net.log_prob(x, t, ...)``,
     ``net.embed(x, t, ...)`` or ``net.cosine(x, t, ...)`` with the chain's step t (an int or a (B,) tensor),
-    it feeds the network its own time label ``timesteps[t]`` (guided-diffusion's ``_WrappedModel``)."""
+    it feeds the network its own time label ``timesteps[t]`` (guided-diffusion's ``_WrappedModel``).
+
+    ``network`` may be a module or a plain function ``f(x, time, ...)``: a reader's own classifier or score
+    receives the noise level's time label like the book's networks (guided-diffusion's spaced ``cond_fn``)."""
 
     def __init__(self, network, timesteps):
         super().__init__()
         self.network = network
-        self.timesteps = torch.as_tensor(timesteps, dtype=torch.float32)
+        self.register_buffer("timesteps", torch.as_tensor(timesteps, dtype=torch.float32), persistent=False)
 
     def time(self, t, x):
         """The network's time labels (B,) for the chain's step t and a batch x."""
-        t = torch.as_tensor(t, device="cpu")
+        t = torch.as_tensor(t, device=self.timesteps.device)
         labels = self.timesteps[t.round().long()]
         return (labels.expand(len(x)) if labels.ndim == 0 else labels).to(x.device)
 
@@ -173,9 +186,11 @@ class GaussianDiffusion:
     def wrap(self, network):
         """``network`` called with this chain's steps (see :class:`TimeMapped`); a network already wrapped
         for this chain is returned as it is."""
-        if isinstance(network, TimeMapped) and torch.equal(network.timesteps, self.time_labels):
+        if isinstance(network, TimeMapped) and torch.equal(network.timesteps.cpu(), self.time_labels):
             return network
-        return TimeMapped(network, self.time_labels)
+        mapped = TimeMapped(network, self.time_labels)
+        device = _device_of(network)
+        return mapped if device is None else mapped.to(device)
 
     def p_mean_variance(self, model, xt, t, mask=None):
         """Mean and variance of p_theta(x_{t-1} | x_t) from eps_theta, and x0_hat: Eq. 7 (correct form), or
@@ -183,9 +198,10 @@ class GaussianDiffusion:
 
         "guidance_variance" is the variance the guidance of Alg. 1-4 weighs its pull with: the step's own under
         DDPM; under DDIM, whose own is eta^2 beta~_t (0 at eta = 0), the paper's sigma_t^2 = beta_t, so that
-        guidance pulls about as hard whatever the sampler's noise (our choice)."""
+        guidance pulls about as hard whatever the sampler's noise (our choice).  "time" is the network's time
+        label of step t (what hooks and callbacks, which are given the chain's step, read the noise level by)."""
         eps = self.wrap(model)(xt, t, mask)
-        return self.mean_variance_from_eps(xt, t, eps)
+        return {**self.mean_variance_from_eps(xt, t, eps), "time": float(self.timesteps[t])}
 
     def mean_variance_from_eps(self, xt, t, eps):
         """:meth:`p_mean_variance` for a given noise estimate eps (the mean is linear in eps)."""

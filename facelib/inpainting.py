@@ -111,6 +111,13 @@ class KnownFrames:
         noise = torch.randn(self.x0.shape, generator=generator).to(self.x0.device)
         return self.merge(noise, self.noised(self.diffusion.num_steps))
 
+    def sample(self, model, seed, steps=None, callback=None, progress=True):
+        """x_0 of the chain conditioned on the known frames: x_T from :meth:`start`, then ``steps`` (None: the
+        whole chain) with this hook.  One random stream (``seed``: an int or a torch.Generator) makes x_T and
+        then every step's noise, so that no step re-draws the values x_T was made of."""
+        generator = seed if isinstance(seed, torch.Generator) else torch.Generator().manual_seed(seed)
+        return self.diffusion.run(model, self.start(generator), generator, steps, self, callback, progress)
+
     def merge(self, unknown, known):
         return torch.where(known_coordinates(self.known), known, unknown)
 

@@ -54,10 +54,11 @@ def spring_and_text(head, denoiser, x0, embeddings, steps, ks, guidance_weight=0
     if any(not 1 <= k <= steps for k in ks):
         raise ValueError(f"reverse steps ks must lie in 1..{steps}, got {list(ks)}")
     for k in ks:
-        xt = chain.q_sample(x0, torch.full((len(x0),), k), generator=torch.Generator().manual_seed(k))
+        generator = torch.Generator().manual_seed(seed * 100_003 + k)  # one stream: x_t's noise, then the step's
+        xt = chain.q_sample(x0, torch.full((len(x0),), k), generator=generator)
         with torch.no_grad():
             out = chain.p_mean_variance(denoiser.model, xt, k)
-        x = out["mean"] + out["variance"].sqrt() * torch.randn(xt.shape, generator=torch.Generator().manual_seed(seed))
+        x = out["mean"] + out["variance"].sqrt() * torch.randn(xt.shape, generator=generator)
         t_prev = chain.model_time(k - 1, len(x0))
         spring = guidance.gradient_at(x, lambda v: guidance_weight * guidance.log_p_theta(v, out)).abs()
         text = guidance.gradient_at(x, lambda v: head.model.cosine(v, t_prev, embeddings)).abs()

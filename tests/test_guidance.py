@@ -254,3 +254,28 @@ def test_under_ddim_the_mean_shift_moves_the_noise_estimate_as_dhariwal_and_nich
     ddpm_shift = 2.0 * diffusion.betas[t] * grad
     ratio = ((expected - out["mean"]).norm() / ddpm_shift.norm()).item()
     assert ratio == pytest.approx(0.5 / diffusion.alphas[t], rel=0.02)
+
+
+def test_a_plain_function_score_receives_the_noise_levels_time_as_guided_diffusions_spaced_cond_fn():
+    """On a respaced chain a reader's own score f(x, time) is given the model's time label timesteps[t], not the
+    chain's step t (guided-diffusion's SpacedDiffusion wraps cond_fn like the model).  The reference below is
+    guided-diffusion's condition_mean written out: mean + variance * grad log p(y | x_t, timestep_map[t])."""
+    chain = GaussianDiffusion(linear_betas(2000)).respace(100)
+    target = torch.randn(2, 8, 68, 3, generator=torch.Generator().manual_seed(1))
+    seen = []
+
+    def log_p(x, time):  # a "classifier" whose pull depends on the noise level
+        seen.append(time.clone())
+        return -(time[:, None, None, None] / 2000.0 * (x - target) ** 2).flatten(1).sum(1)
+
+    xt = torch.randn(2, 8, 68, 3, generator=torch.Generator().manual_seed(2))
+    for t in (50, 100):
+        var = torch.full((2, 1, 1, 1), float(chain.sigmas[t] ** 2))
+        out = {"mean": xt, "variance": var, "guidance_variance": var}
+        shifted = MeanShiftGuidance(log_p, chain, scale=1.0)(xt, xt, t, out)
+        assert torch.equal(seen[-1], torch.full((2,), float(chain.timesteps[t])))
+        time = torch.full((2,), float(chain.timesteps[t]))
+        reference = xt + var * (-2 * time[:, None, None, None] / 2000.0 * (xt - target))
+        assert torch.allclose(shifted, reference, rtol=1e-5, atol=1e-6)
+    # the chain's step itself (the old behaviour) would have been 19-27 % off: it is not what f received
+    assert not torch.equal(seen[-1], torch.full((2,), 100.0))

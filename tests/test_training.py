@@ -4,6 +4,7 @@ import json
 import os
 import subprocess
 import sys
+import zlib
 
 import numpy as np
 import pytest
@@ -12,7 +13,7 @@ import torch
 from facelib import config, training
 from facelib.__main__ import main
 from facelib.training import Draws, swap_anatomy, training_anatomies
-from facelib.training.loop import TrainingLog, device_for, learning_rate
+from facelib.training.loop import Objective, TrainingLog, device_for, learning_rate
 
 
 def _recipe(steps=6, **settings):
@@ -65,6 +66,122 @@ def test_a_run_resumed_from_its_saved_state_ends_where_an_uninterrupted_run_ends
     assert history["step"][-1] == 6
 
 
+class _Encoder:
+    """A stand-in for the sentence encoder: a fixed random 16-d vector per text (no model to load)."""
+
+    def encode(self, texts):
+        return np.stack([np.random.default_rng(zlib.crc32(t.encode())).standard_normal(16) for t in texts]
+                        ).astype(np.float32)
+
+
+def _small_bit(recipe, **sizes):
+    """The recipe with a one-layer BiT of width 32 (its dropout of 0.1 kept)."""
+    recipe.architecture = dataclasses.replace(recipe.architecture, width=32, depth=1, heads=2, ff=32, **sizes)
+    return recipe
+
+
+def _tiny(name, **settings):
+    return training.settings_for(name, steps=6, batch_size=8, **settings)
+
+
+# the recipes whose models use dropout (torch's global stream), and the GAN (a critic outside its model)
+RESUMABLE = {
+    "guide": lambda: _small_bit(training.GuideRecipe(_tiny("guide"))),
+    "text_head": lambda: _small_bit(training.TextHeadRecipe(_tiny("text_head", dataset="coma"), encoder=_Encoder()),
+                                    embedding_dim=16),
+    "au_regressor": lambda: _small_bit(training.AURegressorRecipe(_tiny("au_regressor"))),
+    "lstm_filler": lambda: training.LSTMFillerRecipe(_tiny("lstm_filler")),
+    "motion3dgan": lambda: training.Motion3DGANRecipe(_tiny("motion3dgan", channels=16, critic_steps=2)),
+}
+
+
+def _dies_in_step(recipe, step):
+    """The recipe, whose process dies (KeyboardInterrupt) as the 0-based ``step`` begins."""
+    objectives, calls = recipe.objectives, [0]
+
+    def dying(model):
+        first, *rest = objectives(model)
+
+        def loss(draws):
+            if calls[0] == step * first.repeats:
+                raise KeyboardInterrupt
+            calls[0] += 1
+            return first.loss(draws)
+        return [Objective(first.module, loss, first.repeats), *rest]
+    recipe.objectives = dying
+    return recipe
+
+
+def _same(a, b):
+    """Bit-identical nested states (tensors compared with torch.equal)."""
+    if isinstance(a, torch.Tensor):
+        return isinstance(b, torch.Tensor) and a.dtype == b.dtype and torch.equal(a, b)
+    if isinstance(a, dict):
+        return isinstance(b, dict) and a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)
+    if isinstance(a, (list, tuple)):
+        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b))
+    return a == b
+
+
+def _without_seconds(history):
+    return {k: v for k, v in history.items() if k != "seconds"}
+
+
+@pytest.mark.parametrize("name", RESUMABLE)
+def test_every_recipe_with_dropout_and_the_gan_resume_bit_for_bit(name, tmp_path):
+    """6 steps in one go against 3 steps, a death in the 4th, and a resumed run: the same final training
+    state (weights, critic, EMA, optimisers, random streams) and the same loss curves, logged every 2 steps."""
+    make = RESUMABLE[name]
+    whole, whole_history = training.fit(make(), progress=False, log_every=2, resume_from=tmp_path / "whole",
+                                        save_every=3)
+    with pytest.raises(KeyboardInterrupt):
+        training.fit(_dies_in_step(make(), 3), progress=False, log_every=2, resume_from=tmp_path / "run", save_every=3)
+    assert torch.load(tmp_path / "run.state.pt", weights_only=False)["step"] == 3
+    resumed, history = training.fit(make(), progress=False, log_every=2, resume_from=tmp_path / "run", save_every=3)
+    assert _same(whole.state_dict(), resumed.state_dict())
+    assert _same(_without_seconds(whole_history), _without_seconds(history)) and history["step"] == [2, 4, 6]
+    a, b = (torch.load(tmp_path / f"{stem}.state.pt", weights_only=False) for stem in ("whole", "run"))
+    for state in (a, b):
+        state["history"] = _without_seconds(state["history"])
+    assert a.keys() == b.keys()
+    for key in a:
+        assert _same(a[key], b[key]), key
+    if name == "motion3dgan":
+        assert len(a["modules"]) == 2  # the critic and the generator
+
+
+def test_a_kill_while_the_state_is_written_leaves_the_previous_state_intact(tmp_path, monkeypatch):
+    whole, _ = training.fit(_recipe(6), progress=False)
+    save, calls = torch.save, []
+
+    def dying_save(obj, f):  # the second state (step 4) is half written when the process dies
+        calls.append(1)
+        if len(calls) == 2:
+            f.write(b"half a state")
+            raise KeyboardInterrupt
+        save(obj, f)
+    monkeypatch.setattr(torch, "save", dying_save)
+    with pytest.raises(KeyboardInterrupt):
+        training.fit(_recipe(6), progress=False, resume_from=tmp_path / "run", save_every=2)
+    monkeypatch.undo()
+    assert len(calls) == 2 and [p.name for p in tmp_path.iterdir()] == ["run.state.pt"]
+    assert torch.load(tmp_path / "run.state.pt", weights_only=False)["step"] == 2
+    resumed, history = training.fit(_recipe(6), progress=False, resume_from=tmp_path / "run", save_every=2)
+    assert _same(whole.state_dict(), resumed.state_dict()) and history["step"][-1] == 6
+
+
+def test_a_resume_with_other_settings_is_refused_with_what_differs(tmp_path):
+    training.fit(_recipe(3), progress=False, resume_from=tmp_path / "run")
+    state = tmp_path / "run.state.pt"
+    with pytest.raises(ValueError, match=r"other settings \(settings\.lr: 0\.0005 saved, 0\.002 now; settings\.seed: "
+                                         r"0 saved, 1 now\): resume with the same settings, or delete .*run\.state\.pt "
+                                         r"to start afresh"):
+        training.fit(_recipe(3, lr=2e-3, seed=1), progress=False, resume_from=tmp_path / "run")
+    torch.save({k: v for k, v in torch.load(state, weights_only=False).items() if k != "record"}, state)
+    with pytest.raises(ValueError, match="records no settings"):
+        training.fit(_recipe(3), progress=False, resume_from=tmp_path / "run")
+
+
 def test_settings_refuse_impossible_values_with_the_allowed_ones():
     with pytest.raises(ValueError, match="optimizer must be one of"):
         config.DenoiserTraining(optimizer="sgd")
@@ -97,7 +214,7 @@ def test_two_processes_under_torchrun_train_the_weights_of_one_process_with_the_
     args = ["train", "denoiser", "--steps", "3", "--device", "cpu"]
     env = dict(os.environ, OMP_NUM_THREADS="1")
     run = subprocess.run([sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node", "2",
-                          "-m", "facelib", *args, "--batch-size", "8", "--out", str(tmp_path / "two")],
+                          "-m", "facelib", *args, "--batch-size", "8", "--out", str(tmp_path / "two"), "--resume"],
                          env=env, capture_output=True, text=True, timeout=600)
     assert run.returncode == 0, run.stderr[-3000:]
     assert main([*args, "--batch-size", "8", "--out", str(tmp_path / "one")]) == 0
@@ -107,6 +224,10 @@ def test_two_processes_under_torchrun_train_the_weights_of_one_process_with_the_
     worst = max((two[k] - one[k]).abs().max().item() for k in one)
     assert worst < 3e-5, f"two processes differ from one by {worst:.2g}"
     assert max((half[k] - one[k]).abs().max().item() for k in one) > 10 * 3e-5
+    # the logged loss is that of the whole global batch (averaged over the processes), not of rank 0's half
+    two, one = (json.loads((tmp_path / f"{name}.json").read_text())["history"]["loss"] for name in ("two", "one"))
+    np.testing.assert_allclose(two, one, rtol=1e-4)
+    assert not (tmp_path / "two.state.pt").exists()  # saved at the last step (every rank's random state), then removed
 
 
 def test_anatomy_augmentation_keeps_the_motion_and_swaps_the_neutral_face(coma_train):

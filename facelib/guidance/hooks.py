@@ -3,8 +3,9 @@
 The model is never changed: guidance is a hook ``guide(x_hat, xt, t, out)`` handed to
 :meth:`GaussianDiffusion.p_sample`, which receives the unguided sample x_hat_{t-1} ~ p_theta(. | x_t)
 (Alg. 1 lines 3-8), the chain's step t and the model's mean and variance ``out``, and returns the
-x_{t-1} to continue with.  Hooks speak in the chain's steps only; the scores they climb
-(facelib/guidance/scores.py) are made for the chain when the hook is built.
+x_{t-1} to continue with.  Hooks speak in the chain's steps (``out["time"]`` is the noise level's time label);
+the scores they climb (facelib/guidance/scores.py, or a reader's plain function ``score(x, time)``) are made
+for the chain when the hook is built and receive the networks' time labels.
 
 * :class:`OptimisationGuidance`, the paper's choice (after Diffusion-LM [51]):
       x_{t-1} = argmax_x [ lambda log p_theta(x | x_t) + score(x, t-1) ]       (Alg. 1 line 10)
@@ -33,8 +34,10 @@ from ..diffusion import GaussianDiffusion
 
 
 def _for_chain(score, diffusion):
-    """The score made for the chain's steps (a plain function is used as it is)."""
-    return score.for_chain(diffusion) if hasattr(score, "for_chain") else score
+    """The score made for the chain's steps: the book's scores wrap their networks (``for_chain``); a plain
+    function ``score(x, time)`` is wrapped whole, so that it too receives the network's time label of the noise
+    level, not the respaced chain's step (guided-diffusion's spaced ``cond_fn``)."""
+    return score.for_chain(diffusion) if hasattr(score, "for_chain") else diffusion.wrap(score)
 
 
 def steps_of(t, x):

@@ -124,8 +124,7 @@ def au_control(curves, n=16, neutral=None, settings=AUControl(), denoiser=None, 
         hook = chain(hook, ReconstructionGuidance(denoiser.model, diffusion, x0, known_t,
                                                   settings.reconstruction_scale))
     hook = KnownFrames(diffusion, x0, known_t, known_noise(settings.seed), inner=hook)
-    x_T = hook.start(torch.Generator().manual_seed(settings.seed))
-    out = diffusion.run(denoiser.model, x_T, settings.seed, diffusion.schedule(), hook, None, progress)
+    out = hook.sample(denoiser.model, settings.seed, progress=progress)
     return keep_known(denoiser.to_mm(out), given, known)
 
 

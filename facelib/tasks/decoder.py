@@ -33,6 +33,7 @@ def decoder_then_diffusion(text, n=8, settings=DecoderThenDiffusion(), denoiser=
         raise ValueError(f"start must be a step in 1..{last}, got {settings.start!r}")
     k = max(1, int(np.argmin(np.abs(diffusion.timesteps - settings.start))))
     x0 = denoiser.to_model(generate_from_text(decoder, texts, shape[1]))
-    x_start = diffusion.q_sample(x0, k, generator=torch.Generator().manual_seed(settings.seed))
-    x = diffusion.run(denoiser.model, x_start, settings.seed, diffusion.schedule(k), progress=progress)
+    generator = torch.Generator().manual_seed(settings.seed)  # one stream: x_start's noise, then every step's
+    x_start = diffusion.q_sample(x0, k, generator=generator)
+    x = diffusion.run(denoiser.model, x_start, generator, diffusion.schedule(k), progress=progress)
     return denoiser.to_mm(x)

@@ -31,8 +31,6 @@ def fill(sequences, known, settings=Fill(), denoiser=None, progress=True, callba
     reconstruction = (ReconstructionGuidance(denoiser.model, diffusion, x0, mask_t, settings.reconstruction_scale)
                       if settings.reconstruction_scale else None)
     hook = KnownFrames(diffusion, x0, mask_t, known_noise(settings.seed), inner=reconstruction)
-    x_T = hook.start(torch.Generator().manual_seed(settings.seed))
-    out = diffusion.run(denoiser.model, x_T, settings.seed, diffusion.schedule(resample=settings.resample), hook,
-                        callback, progress)
+    out = hook.sample(denoiser.model, settings.seed, diffusion.schedule(resample=settings.resample), callback, progress)
     # the sampler returns the known frames through normalise/denormalise, exact only to ~1e-6 mm
     return keep_known(denoiser.to_mm(out), x, mask)

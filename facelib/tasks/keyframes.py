@@ -98,8 +98,7 @@ def keyframes(keys, n=4, neutral=None, settings=Keyframes(), denoiser=None, prog
         guide = ReconstructionGuidance(denoiser.model, diffusion, x0, known, settings.reconstruction_scale)
     if settings.method in ("replace", "both"):
         guide = KnownFrames(diffusion, x0, known, known_noise(settings.seed), inner=guide)
-        x_T = guide.start(torch.Generator().manual_seed(settings.seed))
-        out = diffusion.run(denoiser.model, x_T, settings.seed, diffusion.schedule(), guide, None, progress)
+        out = guide.sample(denoiser.model, settings.seed, progress=progress)
     else:
         out = diffusion.sample(denoiser.model, shape, seed=settings.seed, guide=guide, progress=progress)
     return denoiser.to_mm(out)

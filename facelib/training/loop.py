@@ -12,11 +12,17 @@ CPU, nccl on GPU), which averages the gradients.  Every random draw of a step is
 batch from one stream seeded alike in every process, and each process keeps its rows
 (rank, rank + N, ...), the interleaving of torch's DistributedSampler: N processes see exactly the
 examples and noise of one process with the same global batch, and, without dropout, take the same
-steps up to float rounding (tests/test_training.py checks it).  Only rank 0 writes files.
+steps up to float rounding (tests/test_training.py checks it).  Dropout draws from torch's global
+stream, which is not sharded: rank 0 keeps a single process's stream and rank r > 0 reseeds it with
+seed + r once the model is built, so that the processes drop different units; with dropout, N
+processes train as well as one but not bit for bit like it.  The logged values are averaged over the
+processes (the loss of the global batch).  Only rank 0 writes files; the process group that fit
+formed is destroyed when it returns.
 """
 from __future__ import annotations
 
 import copy
+import dataclasses
 import itertools
 import math
 import os
@@ -158,8 +164,11 @@ def start_distributed(device=None, timeout_s=120):
 
 
 def is_main_process():
-    """True in a single process and on rank 0 of a distributed run (the one that writes files)."""
-    return not torch.distributed.is_initialized() or torch.distributed.get_rank() == 0
+    """True in a single process and on rank 0 of a distributed run (the one that writes files), also
+    once :func:`fit` has destroyed its process group (torchrun's RANK)."""
+    if torch.distributed.is_initialized():
+        return torch.distributed.get_rank() == 0
+    return int(os.environ.get("RANK", "0")) == 0
 
 
 def learning_rate(settings: Optimisation, step, total_steps):
@@ -198,11 +207,29 @@ def fit(recipe, progress=True, log_every=50, device=None, resume_from=None, save
     """Train ``recipe``'s model with its settings; returns (model, history) on every process.
 
     The model returned is the EMA of the weights when the settings keep one.  ``resume_from``: a path
-    stem; every ``save_every`` steps rank 0 writes the training state (weights, EMA, optimisers, random
-    stream, loss curves, step) to ``<stem>.state.pt``, and a run given an existing state continues from
-    it exactly as if it had not stopped."""
-    settings = recipe.settings
+    stem; every ``save_every`` steps and at the last step rank 0 writes the training state to
+    ``<stem>.state.pt`` (atomically: a temporary file in the same folder, then renamed, so that a kill
+    mid-write leaves the previous state intact).  The state holds the step; the weights and buffers of
+    the model and of every module an objective trains (a GAN's critic too); the EMA; every optimiser;
+    the shared stream of the draws; torch's global random state (dropout) of every process (and of its
+    GPU); the loss curves with the values not yet averaged into them; and the run's record (recipe
+    name, settings, model config, number of processes).  A run given an existing state continues from
+    it and ends with the weights, EMA and loss curves of a run that had not stopped, bit for bit on a
+    CPU (on a GPU, as far as its kernels are deterministic); the curves' wall-clock "seconds" are the
+    only difference.  A state whose record differs from this run's is refused with the fields that
+    differ.  Recipes that walk epochs do not resume."""
+    owns_group = not torch.distributed.is_initialized()
     dist = start_distributed(device)
+    owns_group = owns_group and torch.distributed.is_initialized()
+    try:
+        return _fit(recipe, dist, progress, log_every, resume_from, save_every)
+    finally:
+        if owns_group:
+            torch.distributed.destroy_process_group()
+
+
+def _fit(recipe, dist, progress, log_every, resume_from, save_every):
+    settings = recipe.settings
     torch.manual_seed(settings.seed)
     generator = torch.Generator().manual_seed(settings.seed)
     model = recipe.build(generator).to(dist.device)
@@ -215,15 +242,19 @@ def fit(recipe, progress=True, log_every=50, device=None, resume_from=None, save
             raise ValueError(f"the batch of {settings.batch_size} does not split into {dist.world} equal shards")
     losses = [_LossOf(o) if dist.world == 1 else torch.nn.parallel.DistributedDataParallel(_LossOf(o))
               for o in objectives]
+    if dist.rank:
+        torch.manual_seed(settings.seed + dist.rank)  # each process its own dropout (see the module docstring)
     optimisers = [_optimiser(settings, o.module) for o in objectives]
     ema = copy.deepcopy(model).requires_grad_(False) if settings.ema_decay is not None else None
     total, batches = _batches(settings, recipe.size, generator)
     log = TrainingLog(total, total // settings.epochs if settings.epochs else log_every)
+    trained = _Trained(model, [o.module for o in objectives], ema, optimisers, generator, log)
+    record = _record(recipe, model, dist.world)
     start = 0
     if resume_from is not None and _state_path(resume_from).exists():
         if settings.epochs is not None:
             raise ValueError("resuming works for recipes that draw batches with replacement (epochs=None)")
-        start = _load_state(_state_path(resume_from), model, ema, optimisers, generator, log)
+        start = _load_state(_state_path(resume_from), trained, record, dist)
     model.train()
     bar = tqdm(range(start, total), desc=f"train {recipe.name}", disable=not (progress and dist.is_main))
     for step, indices in zip(bar, batches):
@@ -247,29 +278,99 @@ def fit(recipe, progress=True, log_every=50, device=None, resume_from=None, save
                 decay = min(settings.ema_decay, (1 + step) / (10 + step))
                 for pe, pm in zip(ema.parameters(), model.parameters()):
                     pe.lerp_(pm, 1 - decay)
-        log.add(step, **values)
-        if resume_from is not None and dist.is_main and ((step + 1) % save_every == 0 or step + 1 == total):
-            _save_state(_state_path(resume_from), step + 1, model, ema, optimisers, generator, log)
+        log.add(step, **_mean_over_processes(values, dist))
+        if resume_from is not None and ((step + 1) % save_every == 0 or step + 1 == total):
+            random_states = _random_states(dist)  # a collective: every process takes part
+            if dist.is_main:
+                _save_state(_state_path(resume_from), step + 1, trained, record, random_states)
     result = (ema if ema is not None else model).eval()
     return result, log.history
 
 
-def _save_state(path, step, model, ema, optimisers, generator, log):
+def _mean_over_processes(values, dist):
+    """The logged values averaged over the processes (each process's are those of its shard)."""
+    if dist.world == 1 or not values:
+        return values
+    total = torch.tensor(list(values.values()), dtype=torch.float64, device=dist.device)
+    torch.distributed.all_reduce(total)
+    return dict(zip(values, (total / dist.world).tolist()))
+
+
+@dataclass
+class _Trained:
+    """What a run changes as it trains, i.e. what its state file holds besides the random states."""
+
+    model: torch.nn.Module
+    modules: list  # the objectives' modules (a GAN's critic is not part of its model)
+    ema: torch.nn.Module | None
+    optimisers: list
+    generator: torch.Generator
+    log: TrainingLog
+
+
+def _record(recipe, model, world):
+    """What a resumed run must share with the run that saved the state: {field: value}."""
+    return {"recipe": recipe.name, "processes": world,
+            **{f"settings.{k}": v for k, v in dataclasses.asdict(recipe.settings).items()},
+            **{f"model.{k}": v for k, v in recipe.model_config(model).items()}}
+
+
+def _random_states(dist):
+    """torch's global random state (CPU, and the GPU this process trains on) of every process, by rank."""
+    own = {"cpu": torch.get_rng_state(),
+           "cuda": torch.cuda.get_rng_state(dist.device) if dist.device.type == "cuda" else None}
+    if dist.world == 1:
+        return [own]
+    states = [None] * dist.world
+    torch.distributed.all_gather_object(states, own)
+    return states
+
+
+def _save_state(path, step, trained, record, random_states):
+    """Write the training state to ``path`` atomically: a kill mid-write leaves the previous state intact."""
+    t = trained
+    state = {"step": step, "record": record, "model": t.model.state_dict(),
+             "modules": [m.state_dict() for m in t.modules], "ema": None if t.ema is None else t.ema.state_dict(),
+             "optimisers": [o.state_dict() for o in t.optimisers], "generator": t.generator.get_state(),
+             "random_states": random_states, "history": t.log.history, "running": t.log._running}
     path.parent.mkdir(parents=True, exist_ok=True)
-    torch.save({"step": step, "model": model.state_dict(), "ema": None if ema is None else ema.state_dict(),
-                "optimisers": [o.state_dict() for o in optimisers], "generator": generator.get_state(),
-                "history": log.history}, path)
+    partial = path.with_name(path.name + ".partial")
+    try:
+        with open(partial, "wb") as f:
+            torch.save(state, f)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(partial, path)
+    finally:
+        partial.unlink(missing_ok=True)
 
 
-def _load_state(path, model, ema, optimisers, generator, log):
+def _load_state(path, trained, record, dist):
+    """Restore a saved training state (refused if its record differs from this run's); returns its step."""
     state = torch.load(path, map_location="cpu", weights_only=False)
-    model.load_state_dict(state["model"])
-    if ema is not None:
-        ema.load_state_dict(state["ema"])
-    for opt, saved in zip(optimisers, state["optimisers"]):
-        opt.load_state_dict(saved)
-    generator.set_state(state["generator"])
-    log.history.clear()
-    log.history.update(state["history"])
-    log._t0 = time.perf_counter() - (log.history["seconds"][-1] if log.history["seconds"] else 0.0)
+    saved = state.get("record")
+    if saved is None:
+        raise ValueError(f"{path} records no settings (an older facelib wrote it): delete it to start afresh")
+    differ = [k for k in sorted(saved.keys() | record.keys()) if saved.get(k, "(none)") != record.get(k, "(none)")]
+    if differ:
+        changes = "; ".join(f"{k}: {saved.get(k, '(none)')!r} saved, {record.get(k, '(none)')!r} now" for k in differ)
+        raise ValueError(f"{path} was saved by a run with other settings ({changes}): resume with the same "
+                         f"settings, or delete {path} to start afresh")
+    t = trained
+    t.model.load_state_dict(state["model"])
+    for module, saved_module in zip(t.modules, state["modules"]):
+        module.load_state_dict(saved_module)
+    if t.ema is not None:
+        t.ema.load_state_dict(state["ema"])
+    for opt, saved_opt in zip(t.optimisers, state["optimisers"]):
+        opt.load_state_dict(saved_opt)
+    t.generator.set_state(state["generator"])
+    own = state["random_states"][dist.rank]
+    pass
+    if own["cuda"] is not None and dist.device.type == "cuda":
+        torch.cuda.set_rng_state(own["cuda"], dist.device)
+    t.log.history.clear()
+    t.log.history.update(state["history"])
+    t.log._running = state["running"]
+    t.log._t0 = time.perf_counter() - (t.log.history["seconds"][-1] if t.log.history["seconds"] else 0.0)
     return state["step"]

@@ -2,8 +2,9 @@
 
 A recipe is what :func:`facelib.training.loop.fit` needs: ``name``, ``settings``, ``size`` (number of
 training examples), ``build(generator)`` (a fresh model, data-dependent buffers fitted),
-``objectives(model)`` (the losses to optimise; one, except for the GAN) and ``metadata(model)`` (what
-its checkpoint records besides the weights).  Every random draw of a loss goes through the step's
+``objectives(model)`` (the losses to optimise and the modules they train, all of which a training state
+saves; one, except for the GAN), ``model_config(model)`` and ``metadata(model)`` (what its checkpoint
+records besides the weights).  Every random draw of a loss goes through the step's
 :class:`~facelib.training.loop.Draws`, so that distributed training sees the draws of one process.
 """
 from __future__ import annotations
