@@ -1,6 +1,6 @@
 """The default of ``python -m facelib sample fill`` (config.Fill): seams, accuracy and FID of candidate settings.
 
-Usage: python benchmarks/fill_defaults.py [--n 64] [--known 0:10,30:40] [--save NAME]
+Usage: python benchmarks/fill_defaults.py [--n 64] [--known 0:10,30:40] [--only TEXT] [--save NAME]
 
 ``--n`` coma test sequences (a random subset, numpy seed 0) are filled with the frames ``--known`` given,
 by Alg. 3 as printed and by the book's additions: reconstruction guidance (zeta), RePaint's resampling (r),
@@ -40,6 +40,7 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--n", type=int, default=64, help="coma test sequences (default 64)")
     parser.add_argument("--known", default="0:10,30:40", help="the known frames (default 0:10,30:40)")
+    parser.add_argument("--only", metavar="TEXT", help="only the candidates whose name contains TEXT")
     parser.add_argument("--save", metavar="NAME", help="store the table in results/NAME.json")
     args = parser.parse_args()
     t_start = time.perf_counter()
@@ -66,6 +67,8 @@ def main():
 
     rows = [row("real sequences", truth, {}, 0.0)]
     for name, settings in CANDIDATES.items():
+        if args.only and args.only not in name:
+            continue
         t0 = time.perf_counter()
         x = tasks.fill(truth, known, config.Fill().paper(), denoiser=denoiser, progress=False, **settings)
         rows.append(row(name, x, settings, time.perf_counter() - t0))

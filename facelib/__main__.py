@@ -39,8 +39,7 @@ def _data(args):
     return status
 
 
-TRAINABLE = ("denoiser", "guide", "text_head", "evaluator", "motion3dgan", "actor", "motionclip", "lstm_filler",
-             "deformer")
+TRAINABLE = tuple(training.RECIPES)  # every recipe is trainable
 
 
 def _train(args):
@@ -130,7 +129,8 @@ def main(argv=None):
                    "denoiser: eps_theta of §3.1; guide: the noisy classifier of "
                    "Alg. 1/4; text_head: BiT(x_t, t) of Alg. 2; evaluator: the independent LSTM classifier of §5; "
                    "motion3dgan, actor: the baselines of Table 1; motionclip: the baseline of Table 2; lstm_filler: "
-                   "the baseline of Table 3; deformer: the mesh deformation of §3.3 and the baselines of Table 5")
+                   "the baseline of Table 3; deformer: the mesh deformation of §3.3 and the baselines of Table 5; "
+                   "au_regressor: R(x_t, t) of AU-curve control (the fine-control chapter)")
     p.add_argument("--dataset", default=None, choices=list(data.DATASET_NAMES),
                    help="default: the recipe's (coma; coma+bu for text_head and motionclip, as §5.2)")
     p.add_argument("--type", default=None, choices=list(data.CLASSIFIER_TYPES), help="guide, evaluator: I = label, "

@@ -6,6 +6,7 @@ of the expected kind and that its weights fit the architecture its config descri
 """
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 from pathlib import Path
@@ -63,6 +64,21 @@ def save_checkpoint(name, model, kind, model_config, **metadata):
     return pt, js
 
 
+_RECORDERS = []  # the open recording() blocks: each collects {checkpoint name: sha256} of every load
+
+
+@contextlib.contextmanager
+def recording():
+    """Within the block, every checkpoint loaded is recorded: yields a dict {file stem: sha256} that fills as
+    loads happen (what an output names as the checkpoints that made it)."""
+    used = {}
+    _RECORDERS.append(used)
+    try:
+        yield used
+    finally:
+        _RECORDERS.remove(used)
+
+
 def load_checkpoint(name, kind, build):
     """Load a checkpoint: verify its sha256 and kind, build the model with ``build(config)``.
 
@@ -90,4 +106,6 @@ def load_checkpoint(name, kind, build):
     if missing or unexpected:
         raise ValueError(f"checkpoint {pt.name} does not fit a {kind} built from its config: "
                          f"missing {list(missing)[:5]}, unexpected {list(unexpected)[:5]}")
+    for used in _RECORDERS:
+        used[pt.stem] = actual
     return model.eval(), meta

@@ -491,6 +491,9 @@ class Edit(LabelControl):
     sampler: str = "ddim"  # inversion is DDIM's
     eta: float = 0.0
     refine: int = 2  # fixed-point iterations per inversion step (GaussianDiffusion.invert): 3 network calls per step
+    # frames returned as given, 0-based ranges: the neutral frame of an N2E sequence, which an edit would otherwise
+    # move (issue 42: 2.45 mm on a test sequence); None: every frame regenerated
+    keep: str | None = "0:1"
     default_mean_shift_scale = EDIT_MEAN_SHIFT_SCALE
 
     def __post_init__(self):

@@ -1,4 +1,5 @@
 """The command line: python -m facelib data|train|sample TASK|neutral|animate."""
+import dataclasses
 import functools
 import json
 
@@ -7,7 +8,7 @@ import pytest
 import torch
 import trimesh
 
-from facelib import __main__ as cli, config, meshio as io, tasks
+from facelib import __main__ as cli, cli_sample, config, meshio as io, tasks, training
 from facelib.__main__ import main
 from facelib.face import template as tpl
 
@@ -229,3 +230,50 @@ def test_cli_keyframes_and_au_curves(tmp_path, coma_test, capsys, monkeypatch):
     with pytest.raises(SystemExit):
         main(["sample", "au", "--curve", "AU12:0@0,0.8@20", "--out", str(out)])
     assert "au_regressor_coma_absent not found" in capsys.readouterr().err and not out.exists()
+
+
+@pytest.mark.parametrize("task", list(cli_sample.TASKS))
+def test_every_setting_of_a_task_is_an_option_with_its_help_and_default(task, capsys):
+    """The command line is generated from the settings dataclasses: each field (but those set from the input) is
+    an option whose help states its default; 'none' is offered only where the field allows None."""
+    with pytest.raises(SystemExit):
+        main(["sample", task, "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    settings = cli_sample.TASKS[task].settings
+    for f in dataclasses.fields(settings):
+        if (task, f.name) in cli_sample.INTERNAL:
+            continue
+        option = "--" + f.name.replace("_", "-")
+        assert option in text, f"sample {task}: no option for {f.name}"
+        value = getattr(settings, f.name)
+        assert f"default {'none' if value is None else value}" in text.split(option, 1)[1], (task, f.name)
+        help = cli_sample.TASK_HELP.get((task, f.name), cli_sample.FIELD_HELP[f.name])
+        assert ("'none'" not in help) or "None" in str(f.type), f"sample {task} --{f.name}: 'none' is not allowed"
+
+
+def test_every_recipe_is_trainable_from_the_command_line(tmp_path):
+    assert set(cli.TRAINABLE) == set(training.RECIPES)
+    assert main(["train", "au_regressor", "--steps", "2", "--out", str(tmp_path / "r")]) == 0
+    assert tasks.load_au_regressor(name=str(tmp_path / "r")).model is not None
+
+
+def test_an_output_records_every_checkpoint_it_used_by_checksum(tmp_path):
+    _, used = sample(tmp_path / "x.npz", "label", "--label", "high_smile", "--n", "1", "--steps", "2")
+    assert set(used["checkpoints"]) == {"denoiser_coma", "guide_coma_I"}
+    assert used["checkpoints"]["denoiser_coma"] == tasks.load_denoiser("denoiser_coma").meta["sha256"]
+    assert used["checkpoints"]["guide_coma_I"] == tasks.load_guide("coma").meta["sha256"]
+
+
+def test_sample_edit_is_the_old_edit_and_keeps_the_neutral_frame_by_default(tmp_path, coma_test):
+    seq = tmp_path / "seq.npz"
+    np.savez(seq, landmarks=coma_test.landmarks[:1])
+    a, used = sample(tmp_path / "a.npz", "edit", "--input", str(seq), "--label", "mouth_open", "--steps", "3")
+    assert main(["edit", "--input", str(seq), "--label", "mouth_open", "--steps", "3",
+                 "--out", str(tmp_path / "b.npz")]) == 0
+    with np.load(tmp_path / "b.npz") as f:
+        np.testing.assert_array_equal(a["landmarks"], f["landmarks"])
+    assert used["keep"] == "0:1"
+    np.testing.assert_array_equal(a["landmarks"][0, 0], coma_test.landmarks[0, 0].astype(np.float32))
+    b, used = sample(tmp_path / "c.npz", "edit", "--input", str(seq), "--label", "mouth_open", "--steps", "3",
+                     "--keep", "none")
+    assert used["keep"] is None and np.abs(b["landmarks"][0, 0] - coma_test.landmarks[0, 0]).max() > 1e-3

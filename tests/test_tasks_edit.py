@@ -74,7 +74,7 @@ def test_ddim_inversion_regenerates_a_test_sequence_and_refining_it_divides_the_
 
 def test_edit_changes_the_expression_and_refuses_bad_input(denoiser, coma_test):
     x = coma_test.landmarks[:2]
-    kwargs = dict(steps=6, denoiser=denoiser, progress=False)
+    kwargs = dict(steps=6, denoiser=denoiser, progress=False, keep=None)
     edited = tasks.edit(x, "mouth_open", **kwargs)
     assert edited.shape == x.shape and edited.dtype == np.float32
     guide = tasks.load_guide("coma")  # the guide reads the new label more in the edited sequences than before
@@ -105,6 +105,7 @@ def test_edit_changes_the_expression_and_refuses_bad_input(denoiser, coma_test):
         tasks.edit(x, ["mouth_open"], **kwargs)
     with pytest.raises(ValueError, match="no --paper version"):
         config.Edit().paper()
+    kwargs.pop("keep")
     with pytest.raises(ValueError, match="outside 0:40"):
         tasks.edit(x, "mouth_open", keep="38:41", **kwargs)
     with pytest.raises(ValueError, match="keep holds every frame of a sequence"):
@@ -116,13 +117,13 @@ def test_edit_changes_the_expression_and_refuses_bad_input(denoiser, coma_test):
 def test_edit_keeps_the_frames_asked_for_and_regenerates_the_others(denoiser, coma_test):
     x = coma_test.landmarks[:2]
     kwargs = dict(steps=6, denoiser=denoiser, progress=False)
-    kept = tasks.edit(x, "mouth_open", keep="0:1", **kwargs)
+    kept = tasks.edit(x, "mouth_open", **kwargs)  # the default keeps the neutral frame (config.Edit.keep)
     np.testing.assert_array_equal(kept[:, 0], x[:, 0].astype(np.float32))
     assert np.abs(kept[:, 1:] - x[:, 1:]).max() > 0.5
     # the kept frame follows its own inversion path, which is the chain's own path: with no guidance pull,
     # keeping it changes the other frames by almost nothing (taking path[t] instead of path[t-1]: 0.13 mm)
     still = dict(method="mean_shift", scale=0.0, steps=50, refine=4, denoiser=denoiser, progress=False)
-    gap = np.abs(tasks.edit(x, "mouth_open", keep="0:1", **still) - tasks.edit(x, "mouth_open", **still))
+    gap = np.abs(tasks.edit(x, "mouth_open", keep="0:1", **still) - tasks.edit(x, "mouth_open", keep=None, **still))
     assert gap[:, 1:].max() < 0.01, gap.max()
 
 
@@ -132,7 +133,7 @@ def test_edit_with_classifier_free_guidance_inverts_with_the_free_model(tiny_cfg
     chain = tiny_cfg.diffusion_with(4, eta=0.0)
     free = tasks.invert(tiny_cfg, x, config.Edit(steps=4))  # inverted by the free estimate (no label)
     guided = ClassifierFree(tiny_cfg.model, tiny_cfg.class_indices(["eyebrow"]), 3.0)
-    np.testing.assert_allclose(tasks.edit(x, "eyebrow", scale=3.0, **kwargs),
+    np.testing.assert_allclose(tasks.edit(x, "eyebrow", scale=3.0, keep=None, **kwargs),
                                tiny_cfg.to_mm(chain.run(guided, free, progress=False)), atol=1e-4)
     inverted_guided = tasks.invert(tiny_cfg, x, config.Edit(steps=4), model=guided)
     assert (inverted_guided - free).abs().max() > 1e-3  # so the line above tells the two apart

@@ -59,12 +59,13 @@ def keep_on_path(path, kept, inner=None):
     return hook
 
 
-def edit(sequences, label, keep=None, settings=Edit(), denoiser=None, guide=None, progress=True, **overrides):
+def edit(sequences, label, settings=Edit(), denoiser=None, guide=None, progress=True, **overrides):
     """``sequences`` (F, 68, 3) or (n, F, 68, 3) in mm, each regenerated from its DDIM inversion with label
     guidance towards ``label`` (a name, or one per sequence): (n, F, 68, 3) float32 in mm.
 
-    keep: frames returned as given (e.g. the neutral one), as ranges "0:1" or a mask (F,) or (n, F); they follow
-    their own inversion path while the others are regenerated.  settings: :class:`facelib.config.Edit` (a
+    settings.keep (or the override ``keep=``): frames returned as given, as ranges "0:1" (the default: the neutral
+    frame of an N2E sequence) or a mask (F,) or (n, F); they follow their own inversion path while the others are
+    regenerated; None regenerates every frame.  settings: :class:`facelib.config.Edit` (a
     :class:`facelib.config.LabelControl` on a DDIM chain of 100 steps).  Classifier-free guidance inverts with
     the conditional denoiser told "no label"."""
     x = check_sequences(sequences)
@@ -72,7 +73,7 @@ def edit(sequences, label, keep=None, settings=Edit(), denoiser=None, guide=None
         raise ValueError(f"num_frames {overrides['num_frames']} differs from the sequences' {x.shape[1]} frames")
     settings, _ = task_settings(settings, {**overrides, "num_frames": x.shape[1]}, len(x))
     labels = check_labels(label, len(x))
-    kept = None if keep is None else kept_frames(keep, x.shape[:2])
+    kept = None if settings.keep is None else kept_frames(settings.keep, x.shape[:2])
     denoiser, diffusion, model, hook = label_sampler(labels, settings, denoiser, guide)
     free = model.denoiser if isinstance(model, ClassifierFree) else model  # no label: the free estimate
     path = invert(denoiser, x, settings, free, progress, trajectory=True)
