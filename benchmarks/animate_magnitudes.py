@@ -45,7 +45,7 @@ def main():
     parser.add_argument("--faces", type=int, default=4, help="unseen identities (default 4)")
     parser.add_argument("--seeds", type=int, default=4, help="sampling seeds per face (default 4)")
     parser.add_argument("--steps", type=int, default=None, help="reverse steps (default: the book's, config)")
-    parser.add_argument("--save", metavar="NAME", help="store the table in results/NAME.json")
+    results.add_save_options(parser)
     args = parser.parse_args()
     t_start = time.perf_counter()
     index = get_template().landmark_index
@@ -69,7 +69,7 @@ def main():
         print(rows[-1], flush=True)
     if args.save:
         results.save_result(args.save, "How far `animate` moves unseen faces at the apex", COLUMNS, rows,
-                            results.Run(checkpoints=["denoiser_coma", "guide_coma_S", "deform_ours_identity"],
+                            results.Run(allow_dirty=args.allow_dirty, checkpoints=["denoiser_coma", "guide_coma_S", "deform_ours_identity"],
                                         seeds=list(range(args.faces * args.seeds)), n=args.faces * args.seeds,
                                         steps=[args.steps or config.GeometryAdaptive().steps],
                                         wall_time_s=time.perf_counter() - t_start),

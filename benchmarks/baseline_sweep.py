@@ -52,7 +52,7 @@ def main():
     parser.add_argument("--budget", type=float, default=0.25, help="fraction of each recipe's steps (default 0.25)")
     parser.add_argument("--per-label", type=int, default=20, help="generated sequences per label (default 20)")
     parser.add_argument("--only", type=int, nargs="+", default=None, help="candidates to run, by index")
-    parser.add_argument("--save", metavar="NAME", help="store the table in results/NAME.json")
+    results.add_save_options(parser)
     args = parser.parse_args()
     if not 0 < args.budget <= 1:
         parser.error(f"--budget must be in (0, 1], got {args.budget}")
@@ -74,13 +74,15 @@ def main():
     def save(rows):
         """Store the table now (after every candidate: an interrupted sweep keeps what it measured), merged
         with the stored rows of the candidates this run does not measure."""
+        merged, provenance = results.merged_rows(args.save, rows)
         results.save_result(args.save, "Table 1 baselines: tuning sweep (coma, a fraction of the budget)", COLUMNS,
-                            results.merged_rows(args.save, rows),
-                            results.Run(checkpoints=["ic_coma_I"], seeds=[0], n=len(labels), steps=[],
+                            merged,
+                            results.Run(allow_dirty=args.allow_dirty, checkpoints=["ic_coma_I"], seeds=[0], n=len(labels), steps=[],
                                         wall_time_s=time.perf_counter() - t_start),
                             notes=f"budget {args.budget} of each recipe's steps; {args.per_label} sequences per label; "
                                   "rows of candidates this run did not measure are those of earlier runs (the commit, "
-                                  "date and wall time above are the last run's)")
+                                  "date and wall time above are the last run's; row_provenance names each row's run)",
+                            row_provenance=provenance)
 
     rows = [scored("real test sequences", "", test.landmarks, test.targets("I"), 0, 0.0)]
     print(rows[0], flush=True)

@@ -35,7 +35,7 @@ def checkpoints_of(method, split):
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=4, help="frames per test sequence (default 4)")
-    parser.add_argument("--save", metavar="NAME", help="store the table in results/NAME.json")
+    results.add_save_options(parser)
     args = parser.parse_args()
     t_start = time.perf_counter()
     rows, used, tested = [], [], 0
@@ -73,7 +73,7 @@ def main():
         coarse = deformation.load_deformer("ours", "identity").num_coarse
         results.save_result(args.save, "Table 5: per-vertex error over training seeds, with the closed-form "
                             "regression", COLUMNS, rows,
-                            results.Run(checkpoints=sorted(set(used)), seeds=seeds, n=tested, steps=[],
+                            results.Run(allow_dirty=args.allow_dirty, checkpoints=sorted(set(used)), seeds=seeds, n=tested, steps=[],
                                         wall_time_s=time.perf_counter() - t_start),
                             notes=f"n: test sequences of both splits; {args.frames} evenly spaced frames each; "
                                   f"uniform attention over {coarse} coarse vertices: entropy "

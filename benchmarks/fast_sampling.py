@@ -218,7 +218,7 @@ def main():
                              "stored table and the other rows stay")
     parser.add_argument("--edit-scales", type=float, nargs="+", default=None,
                         help="edit: the mean shift's scales (default: --mean-shift-scale)")
-    parser.add_argument("--save", metavar="NAME", default=None, help="write the table to results/NAME.json")
+    results.add_save_options(parser)
     args = parser.parse_args()
     args.n = args.n or (32 if args.experiment == "edit" else 48)
     if args.n < 24:  # two per class: multimodality and the intervals need them
@@ -238,18 +238,20 @@ def main():
                   "guidance": "Classifier guidance (Alg. 1) against classifier-free guidance (coma)",
                   "edit": "DDIM inversion and editing of test sequences (coma)"}
         steps = {"steps": args.steps, "guidance": [50, 200], "edit": [100]}[args.experiment]
+        provenance = None
         if args.experiment == "steps" and set(args.tasks) != set(steps_tasks(0)):
-            rows = results.merged_rows(args.save, rows, key_length=3)  # the other tasks' rows stay
+            rows, provenance = results.merged_rows(args.save, rows, key_length=3)  # the other tasks' rows stay
         if args.experiment == "edit" and set(args.edit_runs) != set(EDIT_RUNS):
-            rows = results.merged_rows(args.save, rows, key_length=2)
+            rows, provenance = results.merged_rows(args.save, rows, key_length=2)
         path = results.save_result(
             args.save, title=titles[args.experiment], columns=columns, rows=rows,
-            run=results.Run(checkpoints=checkpoints, seeds=[0], n=args.n, steps=steps,
+            run=results.Run(allow_dirty=args.allow_dirty, checkpoints=checkpoints, seeds=[0], n=args.n, steps=steps,
                             wall_time_s=time.perf_counter() - t0),
             notes="intervals: 95 % bootstrap over the sequences (Evaluator.score); FID against the training split "
                   f"from n sequences; DDIM at eta = 0; label control with the book's defaults (config.LabelControl); "
                   "steps with --tasks, edit with --edit-runs: the other rows are those of earlier runs (the commit, "
-                  "date and wall time above are the last run's)")
+                  "date and wall time above are the last run's; row_provenance names each row's run)",
+            row_provenance=provenance)
         print(f"saved {path}")
 
 

@@ -41,7 +41,7 @@ def main():
     parser.add_argument("--n", type=int, default=64, help="coma test sequences (default 64)")
     parser.add_argument("--known", default="0:10,30:40", help="the known frames (default 0:10,30:40)")
     parser.add_argument("--only", metavar="TEXT", help="only the candidates whose name contains TEXT")
-    parser.add_argument("--save", metavar="NAME", help="store the table in results/NAME.json")
+    results.add_save_options(parser)
     args = parser.parse_args()
     t_start = time.perf_counter()
     test = data.load_dataset("coma", "test")
@@ -75,7 +75,7 @@ def main():
     if args.save:
         path = results.save_result(
             args.save, "The fill default: seams, accuracy and FID of candidate settings (coma test split)", COLUMNS,
-            rows, results.Run(checkpoints=["denoiser_coma", "ic_coma_I"], seeds=[0], n=args.n,
+            rows, results.Run(allow_dirty=args.allow_dirty, settings=(config.Fill(),), checkpoints=["denoiser_coma", "ic_coma_I"], seeds=[0], n=args.n,
                               steps=sorted({s["steps"] for s in CANDIDATES.values()}),
                               wall_time_s=time.perf_counter() - t_start),
             notes=f"known frames {args.known}; seams within p95: every known/generated boundary moves at most the "

@@ -52,7 +52,7 @@ def main():
     parser.add_argument("--steps", type=int, nargs="+", default=[200])
     parser.add_argument("--resample", type=int, default=4)
     parser.add_argument("--reconstruction-scale", type=float, default=config.RECONSTRUCTION_SCALE)
-    parser.add_argument("--save", metavar="NAME", help="store the table in results/NAME.json")
+    results.add_save_options(parser)
     args = parser.parse_args()
     t_start = time.perf_counter()
     ev = evaluation.load_evaluator("coma", "I")
@@ -100,7 +100,7 @@ def main():
         path = results.save_result(
             args.save, title="Table 3, expression filling on the coma test split (IC type I)", columns=COLUMNS,
             rows=rows,
-            run=results.Run(checkpoints=["denoiser_coma", "lstm_filler_coma", "ic_coma_I"], seeds=[0], n=n,
+            run=results.Run(allow_dirty=args.allow_dirty, checkpoints=["denoiser_coma", "lstm_filler_coma", "ic_coma_I"], seeds=[0], n=n,
                             steps=sorted(set(args.steps)), wall_time_s=time.perf_counter() - t_start),
             notes=f"masks: inpainting.fill_masks(setting, n, 40, seed=0); sampler seed 0; RePaint r = {args.resample} "
                   f"and reconstruction guidance (zeta = {args.reconstruction_scale:g}) at {low} steps; intervals: "

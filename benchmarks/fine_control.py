@@ -162,7 +162,7 @@ def main():
                         help="au: Adagrad rates to compare (default: the book's, config.AU_CURVE_LR, step-scaled)")
     parser.add_argument("--scale", type=float, nargs="*", default=[],
                         help="keyframes: more reconstruction scales zeta to try with 'both' (default: none)")
-    parser.add_argument("--save", metavar="NAME", help="store the table in results/NAME.json")
+    results.add_save_options(parser)
     args = parser.parse_args()
     default = config.Keyframes() if args.experiment == "keyframes" else config.AUControl()
     args.steps = args.steps or default.steps
@@ -176,7 +176,7 @@ def main():
                  "floor": "What the rig fit resolves: its error per AU on real test sequences",
                  "keyframes": "Landmark keyframes: constraint error, smoothness, realism"}[args.experiment]
         results.save_result(args.save, title, COLUMNS[args.experiment], rows,
-                            results.Run(checkpoints=checkpoints, seeds=SEEDS[args.experiment], n=args.n, steps=steps,
+                            results.Run(allow_dirty=args.allow_dirty, checkpoints=checkpoints, seeds=SEEDS[args.experiment], n=args.n, steps=steps,
                                         wall_time_s=time.perf_counter() - t_start),
                             notes="; ".join(([] if evaluator is None else [
                                 "FID against the training split with the type-I IC of coma",

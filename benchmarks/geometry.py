@@ -38,7 +38,7 @@ def main():
     parser.add_argument("--steps", type=int, default=100)
     parser.add_argument("--passes", type=int, default=config.HARMONISING_PASSES)
     parser.add_argument("--reconstruction-scale", type=float, default=config.RECONSTRUCTION_SCALE)
-    parser.add_argument("--save", metavar="NAME", help="store the table in results/NAME.json")
+    results.add_save_options(parser)
     args = parser.parse_args()
     t_start = time.perf_counter()
     ev = evaluation.load_evaluator("coma", "S")
@@ -75,7 +75,7 @@ def main():
         path = results.save_result(
             args.save, title="Table 4, geometry-adaptive generation on the coma test split (IC type S), pass by pass",
             columns=COLUMNS, rows=table,
-            run=results.Run(checkpoints=["denoiser_coma", "guide_coma_S", "ic_coma_S"], seeds=[0], n=len(rows_sel),
+            run=results.Run(allow_dirty=args.allow_dirty, checkpoints=["denoiser_coma", "guide_coma_S", "ic_coma_S"], seeds=[0], n=len(rows_sel),
                             steps=[args.steps], wall_time_s=time.perf_counter() - t_start),
             notes=f"{args.per_class or 'all'} test sequences per type-S class, each from its own neutral frame; "
                   f"{args.passes} passes of Alg. 4 (re-noised to T), the last is what Alg. 4 returns; reconstruction "

@@ -32,7 +32,7 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--per-class", type=int, default=2, help="test sequences per type-S class (default 2)")
     parser.add_argument("--lr", type=float, nargs="+", default=[0.01, 0.03, 0.1], help="rates to compare")
-    parser.add_argument("--save", metavar="NAME", help="store the table in results/NAME.json")
+    results.add_save_options(parser)
     args = parser.parse_args()
     t_start = time.perf_counter()
     ev = evaluation.load_evaluator("coma", "S")
@@ -56,7 +56,7 @@ def main():
         print(table[-1], flush=True)
     if args.save:
         results.save_result(args.save, "Alg. 4's Adagrad rate (coma test split, IC type S)", COLUMNS, table,
-                            results.Run(checkpoints=["denoiser_coma", "guide_coma_S", "ic_coma_S"], seeds=[0],
+                            results.Run(allow_dirty=args.allow_dirty, checkpoints=["denoiser_coma", "guide_coma_S", "ic_coma_S"], seeds=[0],
                                         n=len(rows_sel), steps=[config.GeometryAdaptive().steps],
                                         wall_time_s=time.perf_counter() - t_start),
                             notes=f"{args.per_class} test sequences per type-S class; the book's Alg. 4 settings")

@@ -102,7 +102,7 @@ def main():
     parser.add_argument("--lr", type=float, default=None,
                         help="steps: one Adagrad rate for every row (default: tasks.adagrad_lr)")
     parser.add_argument("--mean-shift-scale", type=float, default=10.0, help="table1: the mean-shift row's scale")
-    parser.add_argument("--save", metavar="NAME", default=None, help="write the table to results/NAME.json")
+    results.add_save_options(parser)
     args = parser.parse_args()
     if args.steps is None:
         args.steps = [2000, 500, 200, 100] if args.experiment == "steps" else [200]
@@ -131,7 +131,7 @@ def main():
                   "table1": f"Table 1 (label control), {args.steps[0]} reverse steps for the DDPM rows"}
         path = results.save_result(
             args.save, title=titles[args.experiment], columns=columns, rows=rows,
-            run=results.Run(checkpoints=checkpoints, seeds=[0, 11],
+            run=results.Run(allow_dirty=args.allow_dirty, checkpoints=checkpoints, seeds=[0, 11],
                             n=args.n or max(len(data.load_dataset(d, "test")) for d in args.dataset),
                             steps=args.steps, wall_time_s=time.perf_counter() - t0),
             notes="intervals: 95 % bootstrap over the sequences (Evaluator.score); "

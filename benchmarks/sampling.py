@@ -110,7 +110,7 @@ def main():
     parser.add_argument("--lengths", type=int, nargs="+", default=None,
                         help="compare sequence lengths instead of step counts (e.g. 25 30 35 40 45 50 60)")
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--save", metavar="NAME", default=None, help="write the table to results/NAME.json")
+    results.add_save_options(parser)
     args = parser.parse_args()
     if args.n < 2:
         parser.error(f"--n must be at least 2 (intervals are bootstrapped over the sequences), got {args.n}")
@@ -128,7 +128,7 @@ def main():
     if args.save:
         path = results.save_result(
             args.save, title=title, columns=columns, rows=rows,
-            run=results.Run(checkpoints=checkpoints, seeds=[args.seed], n=args.n, steps=args.steps, wall_time_s=wall),
+            run=results.Run(allow_dirty=args.allow_dirty, checkpoints=checkpoints, seeds=[args.seed], n=args.n, steps=args.steps, wall_time_s=wall),
             notes="mean RMSE (mm) to the closest training sequence over n sequences; "
                   "intervals: 95 % bootstrap over the sequences")
         print(f"saved {path}")

@@ -72,7 +72,7 @@ def main():
                         help="run the guided rows at this lambda and Adagrad rate (at 100 steps); repeatable")
     parser.add_argument("--no-baselines", action="store_true",
                         help="leave out the MotionCLIP-style and decoder + DDPM rows")
-    parser.add_argument("--save", metavar="NAME", help="also write the table to results/NAME.json")
+    results.add_save_options(parser)
     args = parser.parse_args()
     t_start = time.perf_counter()
     kind = "S" if args.enriched else "I"
@@ -139,7 +139,7 @@ def main():
         path = results.save_result(
             args.save, title=f"text control (Alg. 2), {task}, {args.split} texts, dataset {DATASET}", columns=COLUMNS,
             rows=rows,
-            run=results.Run(checkpoints=used + ([] if args.no_baselines else [f"motionclip_{DATASET}"]), seeds=[0],
+            run=results.Run(allow_dirty=args.allow_dirty, checkpoints=used + ([] if args.no_baselines else [f"motionclip_{DATASET}"]), seeds=[0],
                             n=args.n, steps=sorted(set(args.steps)), wall_time_s=time.perf_counter() - t_start),
             notes="texts cycle through the classes of the IC (then each class's texts of the split); GT: n test "
                   "sequences picked with numpy seed 0; sampler seed 0; lr: the Adagrad rate at that number of steps; "

@@ -107,6 +107,11 @@ def _results(args):
         state = "ok" if not e["problems"] else "STALE OR MALFORMED: " + "; ".join(e["problems"])
         print(f"{e['name']:<24} {e['minutes']:6.1f} min on {e['cores']} cores, {e['threads']} torch thread(s), "
               f"{e['date']}  {state}\n    {e['command']}")
+        for change in e["changes"]:
+            print(f"    made before a code change that moves its numbers: {change}")
+        if e["unrecorded"]:
+            print(f"    records no {' or '.join(e['unrecorded'])} (stored before results recorded them): "
+                  "its staleness is checked on its checkpoints only")
     print(f"{len(entries)} stored results in {results.RESULTS_DIR}; re-run a command to rewrite its file")
     return 1 if any(e["problems"] for e in entries) else 0
 

@@ -1,15 +1,20 @@
 """Stored full-scale results: ``results/NAME.json``, a table and its provenance.
 
 A chapter runs a small live version of an experiment within its time budget; the full-scale one
-is a command (``python -m facelib experiment NAME``, see :mod:`facelib.experiments`) that stores
+is a command (a script in benchmarks/ with ``--save NAME``; the chapter names it) that stores
 its table here together with what is needed to trust and to re-run it: the exact command, the
 facelib commit, the sha256 of every checkpoint it used, the seeds, n, steps, the wall time and
 the number of cores.
 
 A stored result is *stale* when a checkpoint it names no longer has the sha256 it recorded (the
-model was retrained after the experiment ran): :func:`problems` says so, naming the file and the
-checkpoint, and a test fails on every stale or malformed file.  Files are written to a temporary
-file and renamed, so an interrupted command leaves the previous result intact.
+model was retrained after the experiment ran), when the datasets it records were built by another world
+(their fingerprint changed), or when a default of the settings it records has changed since (e.g.
+``config.Fill.steps``): :func:`problems` says so, naming the file and what changed, and a test fails on
+every stale or malformed file.  Files are written to a temporary file and renamed, so an interrupted
+command leaves the previous result intact.  A result is not saved from a tree whose facelib/ or
+benchmarks/ have uncommitted changes (its commit would not name the code that made it), unless the
+command's ``--allow-dirty`` says so, which the result then records.  Rows merged from several runs
+(:func:`merged_rows`) each keep the provenance of the run that made them (``row_provenance``).
 """
 from __future__ import annotations
 
@@ -18,13 +23,13 @@ import json
 import os
 import subprocess
 import sys
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import torch
 
 from . import config, tables
-from .checkpoints import checkpoint_paths
+from .checkpoints import checkpoint_paths, world_fingerprint
 
 RESULTS_DIR = config.RESULTS_DIR
 SCHEMA = 1
@@ -34,6 +39,9 @@ FIELDS = {
     "checkpoints": dict, "seeds": list, "n": int, "steps": list, "wall_time_s": float, "cores": int,
     "torch_threads": int, "columns": list, "rows": list, "notes": str,
 }
+# Recorded by every result saved since issue 42 (older files lack them and are not checked for them).
+OPTIONAL = {"world": dict, "settings": dict, "row_provenance": list}
+WATCHED = ("facelib", "benchmarks")  # the code a result's commit must name
 
 
 def result_path(name):
@@ -43,17 +51,44 @@ def result_path(name):
     return RESULTS_DIR / f"{name}.json"
 
 
-def facelib_commit():
-    """The git commit of the working tree (with '+dirty' when facelib/ has uncommitted changes)."""
-    def git(*args):
-        return subprocess.run(["git", *args], cwd=config.PROJECT_ROOT, capture_output=True, text=True,
-                              timeout=30).stdout.strip()
+def _git(*args):
+    return subprocess.run(["git", *args], cwd=config.PROJECT_ROOT, capture_output=True, text=True,
+                          timeout=30).stdout.strip()
+
+
+def uncommitted_code():
+    """The files of facelib/ and benchmarks/ with uncommitted changes (``git status --porcelain`` lines)."""
     try:
-        commit = git("rev-parse", "HEAD") or "unknown"
-        dirty = git("status", "--porcelain", "--", "facelib")
+        return [line for line in _git("status", "--porcelain", "--", *WATCHED).splitlines() if line.strip()]
+    except (OSError, subprocess.SubprocessError):
+        return []
+
+
+def facelib_commit():
+    """The git commit of the working tree (with '+dirty' when facelib/ or benchmarks/ have uncommitted changes)."""
+    try:
+        commit = _git("rev-parse", "HEAD") or "unknown"
     except (OSError, subprocess.SubprocessError):
         return "unknown"
-    return commit + ("+dirty" if dirty else "")
+    return commit + ("+dirty" if uncommitted_code() else "")
+
+
+def check_clean(name, allow_dirty=False):
+    """Refuse (ValueError) to store results/NAME.json from a tree with uncommitted changes to facelib/ or
+    benchmarks/, unless ``allow_dirty`` (a command's --allow-dirty)."""
+    changed = uncommitted_code()
+    if changed and not allow_dirty:
+        raise ValueError(f"results/{name}.json not written: {', '.join(WATCHED)} have uncommitted changes "
+                         f"({'; '.join(changed[:5])}{' ...' if len(changed) > 5 else ''}), so the commit it would "
+                         "record does not name the code that made it; commit them and re-run, or pass "
+                         "--allow-dirty (recorded in the result)")
+
+
+def add_save_options(parser):
+    """--save NAME and --allow-dirty for a benchmark that stores its table in results/NAME.json."""
+    parser.add_argument("--save", metavar="NAME", default=None, help="store the table in results/NAME.json "
+                        "(refused from a tree with uncommitted changes to facelib/ or benchmarks/)")
+    parser.add_argument("--allow-dirty", action="store_true", help="with --save: store it even so (recorded)")
 
 
 def invoking_command():
@@ -81,7 +116,8 @@ def checkpoint_sha256(name):
 class Run:
     """How a stored result was measured: the shipped checkpoints it used (their sha256 are read from
     data/checkpoints), the seeds, the sequences per row, the reverse steps, its wall time, and the
-    command that rewrites it (None: the command line of this process)."""
+    command that rewrites it (None: the command line of this process), whether it may be stored from a tree
+    with uncommitted code, and the settings (config dataclass instances) whose values it measured."""
 
     checkpoints: list
     seeds: list
@@ -89,28 +125,37 @@ class Run:
     steps: list
     wall_time_s: float
     command: str | None = None
+    allow_dirty: bool = False  # the command's --allow-dirty
+    settings: tuple = ()  # the config dataclasses whose defaults the result measured (staleness compares them)
 
 
-def save_result(name, title, columns, rows, run, notes=""):
+def save_result(name, title, columns, rows, run, notes="", row_provenance=None):
     """Write results/NAME.json (the table and its :class:`Run`) atomically; returns its path.
 
     ``columns`` names the entries of every row (a row is a list, one entry per column: a number, a
-    string, or a [low, high] 95 % interval)."""
+    string, or a [low, high] 95 % interval).  ``row_provenance`` (from :func:`merged_rows`): per row, the
+    provenance of the run that made it (None: this run)."""
     path = result_path(name)
+    check_clean(name, run.allow_dirty)
     bad = [r for r in rows if len(r) != len(columns)]
     if bad:
         raise ValueError(f"every row needs {len(columns)} entries ({columns}), got {bad[0]}")
+    commit = facelib_commit()
     record = {
         "schema": SCHEMA, "name": name, "title": title,
         "command": run.command or invoking_command(),
-        "commit": facelib_commit(),
+        "commit": commit + (" (stored with --allow-dirty)" if commit.endswith("+dirty") else ""),
         "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
         "checkpoints": {c: checkpoint_sha256(c) for c in sorted(run.checkpoints)},
         "seeds": [int(s) for s in run.seeds], "n": int(run.n), "steps": [int(s) for s in run.steps],
         "wall_time_s": round(float(run.wall_time_s), 1), "cores": os.cpu_count() or 0,
         "torch_threads": torch.get_num_threads(), "columns": list(columns), "rows": _plain(rows),
-        "notes": notes,
+        "notes": notes, "world": world_fingerprint(),
+        "settings": {type(s).__name__: _plain(asdict(s)) for s in run.settings},
     }
+    if row_provenance is not None:
+        own = {k: record[k] for k in ("commit", "date", "command")}
+        record["row_provenance"] = [own if p is None else p for p in row_provenance]
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     try:
@@ -124,14 +169,23 @@ def save_result(name, title, columns, rows, run, notes=""):
 def merged_rows(name, rows, key_length=1):
     """``rows`` merged into the stored results/NAME.json (when it exists): a stored row is replaced by the new
     row with the same key (its first ``key_length`` entries), stored rows no new row replaces are kept in their
-    order, and new rows with a new key follow.  For benchmarks that re-run some of a table's rows."""
+    order, and new rows with a new key follow.  For benchmarks that re-run some of a table's rows.
+
+    Returns (rows, row_provenance) for :func:`save_result`: per row None (made by this run) or the commit, date
+    and command of the run that made the stored row."""
     path = result_path(name)
     if not path.exists():
-        return list(rows)
+        return list(rows), [None] * len(rows)
     new = {tuple(r[:key_length]): r for r in _plain(rows)}
-    stored = json.loads(path.read_text())["rows"]
-    merged = [new.pop(tuple(r[:key_length]), r) for r in stored]
-    return merged + list(new.values())
+    stored = json.loads(path.read_text())
+    own = {k: stored[k] for k in ("commit", "date", "command")}
+    provenance = stored.get("row_provenance") or [own] * len(stored["rows"])
+    merged, origin = [], []
+    for row, made_by in zip(stored["rows"], provenance):
+        key = tuple(row[:key_length])
+        merged.append(new.pop(key, row))
+        origin.append(None if merged[-1] is not row else made_by)
+    return merged + list(new.values()), origin + [None] * len(new)
 
 
 def problems(record, path="result"):
@@ -149,6 +203,16 @@ def problems(record, path="result"):
         found.append(f"{path}: schema {record['schema']}, this facelib reads schema {SCHEMA}")
     found += [f"{path}: row {i} has {len(r)} entries for {len(record['columns'])} columns"
               for i, r in enumerate(record["rows"]) if len(r) != len(record["columns"])]
+    for key, kind in OPTIONAL.items():
+        if key in record and not isinstance(record[key], kind):
+            found.append(f"{path}: field {key!r} should be {kind.__name__}, is {type(record[key]).__name__}")
+    if "row_provenance" in record and len(record["row_provenance"]) != len(record["rows"]):
+        found.append(f"{path}: {len(record['row_provenance'])} row provenances for {len(record['rows'])} rows")
+    if record.get("world") not in (None, world_fingerprint()):
+        found.append(f"{path}: stale, made on the datasets of world {record['world']}, this process builds "
+                     f"{world_fingerprint()}; re-run: {record['command']}")
+    found += [f"{path}: stale, {change}; re-run: {record['command']}"
+              for change in settings_changes(record.get("settings", {}))]
     for name, stored in record["checkpoints"].items():
         try:
             shipped = checkpoint_sha256(name)
@@ -159,6 +223,20 @@ def problems(record, path="result"):
             found.append(f"{path}: stale, checkpoint {name!r} has sha256 {shipped[:12]}..., the result was "
                          f"computed with {stored[:12]}...; re-run: {record['command']}")
     return found
+
+
+def settings_changes(recorded):
+    """What changed in the defaults of the config dataclasses a result recorded ({class name: fields}), e.g.
+    "config.Fill.steps was 100, is 50 now"; a class or field that no longer exists is a change too."""
+    changes = []
+    for cls, values in recorded.items():
+        if not hasattr(config, cls):
+            changes.append(f"config.{cls} no longer exists")
+            continue
+        now = _plain(asdict(getattr(config, cls)()))
+        changes += [f"config.{cls}.{k} was {v!r}, is {now[k]!r} now" if k in now else f"config.{cls}.{k} is gone"
+                    for k, v in values.items() if now.get(k, object()) != v]
+    return changes
 
 
 def load_result(name):
@@ -213,16 +291,35 @@ def stored_cell(record, key, column, digits=0):
     return tables.interval_cell(stored_value(record, key, column), stored_value(record, key, column, True), digits)
 
 
+# Code changes that move the numbers of results stored before them without changing a checkpoint: the date of
+# the change, what changed and the results it touches.  `python -m facelib results` names them; they are re-run
+# once, after the retrained denoisers (issue 43), and the chapters' live numbers already use the new code.
+CODE_CHANGES = [
+    ("2026-12-05", "one random stream per chain (issue 42: the first reverse step re-added x_T's noise)",
+     ("fill_defaults", "filling_table3", "geometry_table4", "geometry_lr", "fine_control_au", "fine_control_keyframes",
+      "animate_magnitudes", "text_table2_raw", "text_table2_enriched")),
+]
+
+
+def code_changes_since(record):
+    """The entries of :data:`CODE_CHANGES` made after ``record`` was stored that touch it."""
+    return [what for date, what, names in CODE_CHANGES
+            if record.get("name") in names and str(record.get("date", "")) < date]
+
+
 def catalogue():
     """One line per stored result: its name, wall time, cores and torch threads, date, problems
-    (empty when sound and fresh) and the command that rewrites it."""
+    (empty when sound and fresh), the code changes since it was stored that touch it (:data:`CODE_CHANGES`),
+    what it does not record (older results: world, settings) and the command that rewrites it."""
     lines = []
     for name in stored_results():
         record = json.loads(result_path(name).read_text())
         found = problems(record, f"{name}.json")
         lines.append(dict(name=name, minutes=record.get("wall_time_s", float("nan")) / 60,
                           cores=record.get("cores"), threads=record.get("torch_threads"),
-                          date=record.get("date"), problems=found, command=record.get("command")))
+                          date=record.get("date"), problems=found, command=record.get("command"),
+                          changes=code_changes_since(record),
+                          unrecorded=[k for k in ("world", "settings") if k not in record]))
     return lines
 
 

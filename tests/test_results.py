@@ -11,6 +11,7 @@ from facelib import metrics, results
 @pytest.fixture
 def tmp_results(tmp_path, monkeypatch):
     monkeypatch.setattr(results, "RESULTS_DIR", tmp_path)
+    monkeypatch.setattr(results, "uncommitted_code", lambda: [])  # a clean tree (the refusal has its own test)
     return tmp_path
 
 
@@ -40,11 +41,44 @@ def test_save_then_load_keeps_the_table_and_its_provenance(tmp_results):
 
 
 def test_merged_rows_replace_the_stored_rows_of_the_same_key_and_keep_the_others(tmp_results):
-    assert results.merged_rows("demo", [["new", 1.0, [0.0, 2.0]]]) == [["new", 1.0, [0.0, 2.0]]]  # nothing stored
+    assert results.merged_rows("demo", [["new", 1.0, [0.0, 2.0]]]) == ([["new", 1.0, [0.0, 2.0]]], [None])
     results.save_result("demo", "t", ["m", "steps", "x"], [["a", 10, 1.0], ["a", 50, 2.0], ["b", 10, 3.0]],
-                        results.Run(checkpoints=[], seeds=[0], n=1, steps=[], wall_time_s=0.0))
-    merged = results.merged_rows("demo", [["a", 50, 9.0], ["c", 10, 4.0]], key_length=2)
+                        results.Run(checkpoints=[], seeds=[0], n=1, steps=[], wall_time_s=0.0, command="first"))
+    merged, provenance = results.merged_rows("demo", [["a", 50, 9.0], ["c", 10, 4.0]], key_length=2)
     assert merged == [["a", 10, 1.0], ["a", 50, 9.0], ["b", 10, 3.0], ["c", 10, 4.0]]
+    assert [p and p["command"] for p in provenance] == ["first", None, "first", None]
+    results.save_result("demo", "t", ["m", "steps", "x"], merged, results.Run(checkpoints=[], seeds=[0], n=1,
+                        steps=[], wall_time_s=0.0, command="second"), row_provenance=provenance)
+    record = results.load_result("demo")
+    assert [p["command"] for p in record["row_provenance"]] == ["first", "second", "first", "second"]
+    _, provenance = results.merged_rows("demo", [["b", 10, 5.0]], key_length=2)  # kept rows keep their own run
+    assert [p and p["command"] for p in provenance] == ["first", "second", None, "second"]
+
+
+def test_a_result_is_not_stored_from_uncommitted_code_unless_allowed(tmp_results, monkeypatch):
+    monkeypatch.setattr(results, "uncommitted_code", lambda: [" M facelib/tasks/fill.py"])
+    with pytest.raises(ValueError, match=r"demo\.json not written: facelib, benchmarks have uncommitted changes "
+                                         r"\( M facelib/tasks/fill\.py\).*--allow-dirty"):
+        _save()
+    assert not (tmp_results / "demo.json").exists()
+    monkeypatch.setattr(results, "facelib_commit", lambda: "abc+dirty")
+    run = results.Run(checkpoints=[], seeds=[0], n=1, steps=[], wall_time_s=0.0, allow_dirty=True)
+    assert results.load_result(_save(run=run).stem)["commit"] == "abc+dirty (stored with --allow-dirty)"
+
+
+def test_a_result_is_stale_when_its_world_or_the_defaults_it_measured_change(tmp_results):
+    from facelib import config
+    run = results.Run(checkpoints=[], seeds=[0], n=1, steps=[], wall_time_s=0.0, settings=(config.Fill(),),
+                      command="python benchmarks/fill_defaults.py --save demo")
+    path = _save(run=run)
+    record = json.loads(path.read_text())
+    assert record["settings"]["Fill"]["steps"] == config.Fill().steps and results.problems(record) == []
+    record["settings"]["Fill"]["steps"] = 7
+    record["world"] = {"version": 1, "fingerprint": None}
+    found = results.problems(record, "demo.json")
+    assert any("stale, config.Fill.steps was 7, is 100 now; re-run: python benchmarks/fill_defaults.py" in f
+               for f in found), found
+    assert any("stale, made on the datasets of world" in f for f in found), found
 
 
 def test_a_stale_result_names_the_file_and_the_checkpoint(tmp_results):
