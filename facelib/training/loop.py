@@ -144,8 +144,14 @@ def device_for(name=None):
     return torch.device(name)
 
 
+_RENDEZVOUS = {"store": None, "groups": 0}  # torchrun's store, kept for the process group of a later fit
+
+
 def start_distributed(device=None, timeout_s=120):
-    """Join the process group when started by torchrun (WORLD_SIZE > 1), else a single process."""
+    """Join the process group when started by torchrun (WORLD_SIZE > 1), else a single process.
+
+    Each group formed here has its own prefix in torchrun's store: a group formed after :func:`fit`
+    destroyed one (e.g. ``train all``) would otherwise read the keys the previous group left there."""
     world = int(os.environ.get("WORLD_SIZE", "1"))
     dev = device_for(device)
     if world == 1:
@@ -158,8 +164,13 @@ def start_distributed(device=None, timeout_s=120):
         dev = torch.device("cuda", local_rank)
         torch.cuda.set_device(dev)
     if not torch.distributed.is_initialized():
-        torch.distributed.init_process_group("nccl" if dev.type == "cuda" else "gloo",
-                                             timeout=timedelta(seconds=timeout_s))
+        timeout = timedelta(seconds=timeout_s)
+        if _RENDEZVOUS["store"] is None:
+            _RENDEZVOUS["store"] = next(torch.distributed.rendezvous("env://", timeout=timeout))[0]
+        _RENDEZVOUS["groups"] += 1
+        store = torch.distributed.PrefixStore(f"facelib_group{_RENDEZVOUS['groups']}/", _RENDEZVOUS["store"])
+        torch.distributed.init_process_group("nccl" if dev.type == "cuda" else "gloo", store=store, rank=rank,
+                                             world_size=world, timeout=timeout)
     return Distributed(rank, world, dev)
 
 
@@ -366,7 +377,7 @@ def _load_state(path, trained, record, dist):
         opt.load_state_dict(saved_opt)
     t.generator.set_state(state["generator"])
     own = state["random_states"][dist.rank]
-    pass
+    torch.set_rng_state(own["cpu"])
     if own["cuda"] is not None and dist.device.type == "cuda":
         torch.cuda.set_rng_state(own["cuda"], dist.device)
     t.log.history.clear()
