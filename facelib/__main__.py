@@ -161,7 +161,7 @@ def main(argv=None):
                    "trained on this world's datasets (config.WORLD)")
     p.add_argument("--out", default=None, help="checkpoint name or path stem (default: denoiser_<dataset>[_var], "
                    "guide_<dataset>_<type>, ic_<dataset>_<type>, deform_<method>_<split>, <baseline>_<dataset>); "
-                   f"train all: a folder (default {config.CHECKPOINT_DIR.relative_to(config.PROJECT_ROOT)})")
+                   f"train all: a folder (default {config.CHECKPOINT_DIR})")
     p.set_defaults(func=_train)
 
     cli_sample.add_parsers(sub)

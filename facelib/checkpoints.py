@@ -86,6 +86,10 @@ def load_checkpoint(name, kind, build):
     ValueError if it is corrupted, of another world or kind, or does not fit the architecture.
     """
     pt, js = checkpoint_paths(name)
+    if not (config.DATA_DIR / "checkpoints").is_dir():
+        raise FileNotFoundError(f"facelib's data folder (data/checkpoints, data/synthetic) is not at {config.DATA_DIR}: "
+                                "`pip install .` installs the code only; set FACELIB_DATA_DIR to the data/ folder of "
+                                "a clone of the book (or install the clone with `pip install -e .`)")
     if not pt.exists() or not js.exists():
         raise FileNotFoundError(f"checkpoint {pt.with_suffix('')} not found (need both .pt and .json); "
                                 f"train it with `python -m facelib train ...`")

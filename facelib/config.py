@@ -11,7 +11,9 @@ from dataclasses import dataclass, fields, replace
 from pathlib import Path
 
 PROJECT_ROOT = Path(__file__).resolve().parent.parent
-DATA_DIR = PROJECT_ROOT / "data"
+# The shipped checkpoints and dataset fingerprints live in the repository's data/, not in the package: `pip install
+# .` installs code only, and FACELIB_DATA_DIR then names a clone's data/ (checkpoints.load_checkpoint says so).
+DATA_DIR = Path(os.environ.get("FACELIB_DATA_DIR", PROJECT_ROOT / "data"))
 
 # The synthetic world's version.  Version 2 (issue 25; facelib/face/tissue.py: tissue mechanics, magnitudes
 # calibrated to published measurements of real faces) replaced version 1, whose faces moved far less than

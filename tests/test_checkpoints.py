@@ -69,3 +69,10 @@ def test_a_checkpoint_from_before_the_world_was_recorded_is_world_1_and_refused(
     stem.with_suffix(".json").write_text(json.dumps(meta))
     with pytest.raises(ValueError, match=r"trained on world 1, .*train all --missing --only old"):
         load_checkpoint(stem, "denoiser", lambda c: Denoiser(DenoiserConfig(**c)))
+
+
+def test_an_installed_package_without_the_data_folder_says_where_to_point_it(monkeypatch, tmp_path):
+    from facelib import checkpoints, config
+    monkeypatch.setattr(config, "DATA_DIR", tmp_path / "absent")
+    with pytest.raises(FileNotFoundError, match="set FACELIB_DATA_DIR to the data/ folder of a clone"):
+        checkpoints.load_checkpoint("denoiser_coma", "denoiser", lambda c: None)

@@ -49,24 +49,31 @@ class ActorCVAE(nn.Module):
 
     def encode(self, delta, labels):
         """Mean and log-variance (B, width) of q(z | Delta L, y)."""
-        h = self.encoder.encode(delta, torch.zeros(len(delta)), prefix=self.dist_tokens[labels])
+        h = self.encoder.encode(delta, torch.zeros(len(delta), device=delta.device), prefix=self.dist_tokens[labels])
         return self.to_mu(h[:, 0]), self.to_logvar(h[:, 1])
 
     def decode(self, z, labels, num_frames):
         """Delta L (B, F, 68, 3) in normalised units from z (B, width) and labels (B,)."""
-        frames = torch.arange(1, num_frames + 1)
-        queries = sinusoidal_embedding(frames, self.config.width)[None].expand(len(z), -1, -1)
+        frames = torch.arange(1, num_frames + 1, device=z.device)
+        queries = sinusoidal_embedding(frames, self.config.width, dtype=z.dtype)[None].expand(len(z), -1, -1)
         h = self.decoder(queries, (z + self.label_bias[labels])[:, None])
         return self.out(h).reshape(len(z), num_frames, self.config.num_landmarks, 3)
 
     @torch.no_grad()
-    def generate(self, labels, num_frames=40, seed=0):
-        """Landmark sequences (n, F, 68, 3) float32 in mm for class indices ``labels`` (n,)."""
-        labels = torch.as_tensor(np.asarray(labels), dtype=torch.long)
+    def sample(self, labels, num_frames=40, seed=0):
+        """Landmark sequences (n, F, 68, 3) in mm, a tensor where the model is, for class indices ``labels`` (n,).
+        The draws are made on the CPU, so that a seed gives the same sequences on every device."""
         gen = torch.Generator().manual_seed(seed)
-        z = torch.randn(len(labels), self.config.width, generator=gen)
-        neutral = self.neutrals[torch.randint(0, len(self.neutrals), (len(labels),), generator=gen)]
-        return (self.decode(z, labels, num_frames) * self.scale + neutral[:, None]).numpy().astype(np.float32)
+        n = len(labels)
+        z = torch.randn(n, self.config.width, generator=gen).to(self.scale)
+        picks = torch.randint(0, len(self.neutrals), (n,), generator=gen)
+        labels = torch.as_tensor(np.asarray(labels), dtype=torch.long, device=self.scale.device)
+        neutral = self.neutrals[picks.to(self.scale.device)]
+        return self.decode(z, labels, num_frames) * self.scale + neutral[:, None]
+
+    def generate(self, labels, num_frames=40, seed=0):
+        """Landmark sequences (n, F, 68, 3) float32 in mm (numpy) for class indices ``labels`` (n,)."""
+        return self.sample(labels, num_frames, seed).cpu().numpy().astype(np.float32)
 
 
 def config_dict(model):

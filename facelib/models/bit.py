@@ -19,13 +19,14 @@ import torch
 from torch import nn
 
 
-def sinusoidal_embedding(positions, dim, max_period=10_000.0):
-    """Transformer sinusoids of (possibly fractional) positions (...,) -> (..., dim)."""
+def sinusoidal_embedding(positions, dim, max_period=10_000.0, dtype=torch.float32):
+    """Transformer sinusoids of (possibly fractional) positions (...,) -> (..., dim), on the positions' device;
+    computed in float32, returned as ``dtype`` (the network's, so that a float64 network stays float64)."""
     half = dim // 2
     freqs = torch.exp(-math.log(max_period) * torch.arange(half, dtype=torch.float32, device=positions.device) / half)
     args = positions.float()[..., None] * freqs
     emb = torch.cat([torch.sin(args), torch.cos(args)], dim=-1)
-    return torch.nn.functional.pad(emb, (0, dim % 2))
+    return torch.nn.functional.pad(emb, (0, dim % 2)).to(dtype)
 
 
 def check_sequence_input(xt, t, mask, num_landmarks):
@@ -58,12 +59,13 @@ class BiT(nn.Module):
         b, f = xt.shape[:2]
         t = t.to(xt.device)
         frames = torch.arange(1, f + 1, device=xt.device)
-        h = self.fe(xt.reshape(b, f, -1)) + sinusoidal_embedding(frames, self.width)[None]
+        h = self.fe(xt.reshape(b, f, -1))
+        h = h + sinusoidal_embedding(frames, self.width, dtype=h.dtype)[None]
         if prefix is not None:
             prefix = prefix if prefix.ndim == 3 else prefix[None].expand(b, -1, -1)
             h = torch.cat([prefix, h], dim=1)
             if mask is not None:
                 mask = torch.cat([torch.ones(b, prefix.shape[1], dtype=torch.bool, device=mask.device), mask], dim=1)
-        h = h + self.te(sinusoidal_embedding(t, self.width))[:, None]
+        h = h + self.te(sinusoidal_embedding(t, self.width, dtype=h.dtype))[:, None]
         h = self.encoder(h, src_key_padding_mask=None if mask is None else ~mask)
         return self.norm(h)

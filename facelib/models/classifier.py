@@ -43,7 +43,7 @@ class LSTMClassifier(nn.Module):
         """Set the input offset and scale from training sequences (B, F, 68, 3)."""
         self.offset.zero_()
         self.scale.fill_(1.0)
-        z = self._prepare(torch.as_tensor(x, dtype=torch.float32))
+        z = self._prepare(torch.as_tensor(x, dtype=self.offset.dtype, device=self.offset.device))
         self.offset.copy_(z.mean(dim=(0, 1)))
         self.scale.fill_(float((z - self.offset).std()))
 
@@ -58,9 +58,11 @@ class LSTMClassifier(nn.Module):
 
     @torch.no_grad()
     def predict(self, x, batch_size=256):
-        """Predicted classes (n,) for sequences given as a numpy array or tensor (n, F, 68, 3)."""
+        """Predicted classes (n,) (numpy) for sequences given as a numpy array or tensor (n, F, 68, 3)."""
         self.eval()
-        x = torch.as_tensor(np.asarray(x), dtype=torch.float32)
-        return torch.cat([self.forward(x[i:i + batch_size]).argmax(1) for i in range(0, len(x), batch_size)]).numpy()
+        x = torch.as_tensor(x if isinstance(x, torch.Tensor) else np.asarray(x), dtype=self.offset.dtype,
+                            device=self.offset.device)
+        predicted = [self.forward(x[i:i + batch_size]).argmax(1) for i in range(0, len(x), batch_size)]
+        return torch.cat(predicted).cpu().numpy()
 
 

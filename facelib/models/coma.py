@@ -45,10 +45,12 @@ class ChebConv(nn.Module):
         super().__init__()
         self.level, self.order = level, order
         self.layer = nn.Linear(order * in_channels, out_channels)
+        # a buffer, not the cached tensor, so that it moves with the layer (not in the state_dict: the template's)
+        self.register_buffer("laplacian", scaled_laplacian(level), persistent=False)
 
     def forward(self, x):
         b, v, c = x.shape
-        lap = scaled_laplacian(self.level).to(x.dtype)
+        lap = self.laplacian
         terms = [x.transpose(0, 1).reshape(v, b * c)]  # vertex-major: one sparse product per term
         for k in range(1, self.order):
             nxt = torch.sparse.mm(lap, terms[-1])
@@ -86,6 +88,7 @@ class ComaDeformer(nn.Module):
         self.to_code = nn.Linear(self.num_coarse * c.channels[-1], c.latent)
         self.from_z = nn.Linear(c.latent + 3 * c.num_landmarks, self.num_coarse * c.channels[-1])
         outs = tuple(reversed(c.channels[:-1]))
+        self.pools = nn.ModuleList(spiral.Pool(k) for k in range(len(self.encoder) - 1))  # no weights
         self.decoder = nn.ModuleList(ChebConv(i, o, k, c.order) for k, i, o in
                                      zip(range(tpl.NUM_LEVELS - 1, 0, -1), reversed(c.channels), outs))
         self.last = ChebConv(c.channels[0], 3, 0, c.order)
@@ -97,7 +100,7 @@ class ComaDeformer(nn.Module):
         for k, layer in enumerate(self.encoder):
             h = torch.nn.functional.elu(layer(h))
             if k < len(self.encoder) - 1:
-                h = spiral.pool(h, k)
+                h = self.pools[k](h)
         return self.to_code(h.flatten(1))
 
     def forward(self, neutral, delta):

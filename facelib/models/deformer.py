@@ -62,6 +62,7 @@ class Deformer(nn.Module):
             ins = (3,) + tuple(c.channels[:-1])
             self.encoder = nn.ModuleList(spiral.SpiralConv(i, o, spiral.template_spirals(lv, c.spiral_length))
                                          for i, o, lv in zip(ins, c.channels, levels))
+            self.pools = nn.ModuleList(spiral.Pool(lv) for lv in levels[:3])  # no weights: no state_dict entry
             if c.attention:
                 self.query = nn.Linear(c.num_landmarks * 3, d)
             self.to_z_id = nn.Linear(d, c.num_landmarks * 3)
@@ -79,7 +80,7 @@ class Deformer(nn.Module):
         for k, layer in enumerate(self.encoder):
             h = torch.nn.functional.elu(layer(h))
             if k < 3:
-                h = spiral.pool(h, k)
+                h = self.pools[k](h)
         return h
 
     def attend(self, features, delta):

@@ -91,9 +91,12 @@ class Denoiser(BiT):
                 raise ValueError("this denoiser is unconditional (num_classes = 0): it takes no labels")
             tokens = self.encode(xt, t, mask)
         else:
-            labels = torch.full((len(xt),), k) if labels is None else torch.as_tensor(labels)
-            if labels.shape != (len(xt),) or labels.min() < 0 or labels.max() > k:
-                raise ValueError(f"labels must be ({len(xt)},) class indices in 0..{k} ({k}: no label)")
+            if labels is None:
+                labels = torch.full((len(xt),), k, device=xt.device)
+            else:  # checked where the caller keeps them (a list, a CPU tensor: no device round trip)
+                labels = torch.as_tensor(labels)
+                if labels.shape != (len(xt),) or labels.min() < 0 or labels.max() > k:
+                    raise ValueError(f"labels must be ({len(xt)},) class indices in 0..{k} ({k}: no label)")
             tokens = self.encode(xt, t, mask, prefix=self.label_embedding(labels.to(xt.device))[:, None])[:, 1:]
         eps = self.out(tokens).reshape(xt.shape)
         return eps + self.gaussian_eps(xt, t.to(xt.device)) if self.config.gaussian_skip else eps

@@ -40,13 +40,15 @@ class LSTMFiller(nn.Module):
         self.out = nn.Linear(2 * config.hidden, d)
 
     def forward(self, x, known, z=None, generator=None):
-        """x: (B, F, 68, 3) (unknown frames ignored), known: (B, F) bool; returns (B, F, 68, 3)."""
+        """x: (B, F, 68, 3) (unknown frames ignored), known: (B, F) bool; returns (B, F, 68, 3).  ``z`` (B, F, 1):
+        the noise (None: drawn with ``generator``)."""
         b, f = known.shape
         k = known.to(x.dtype)[:, :, None]
-        flat = torch.where(known[:, :, None], x.flatten(2), torch.zeros((), dtype=x.dtype))
+        flat = torch.where(known[:, :, None], x.flatten(2), torch.zeros((), dtype=x.dtype, device=x.device))
         mean = flat.sum(1, keepdim=True) / k.sum(1, keepdim=True)  # mean imputation, (B, 1, D)
-        if z is None:
-            z = torch.randn((b, f, 1), generator=generator, dtype=x.dtype)
+        if z is None:  # drawn on the generator's device (the CPU's by default: the same noise on every device)
+            z = torch.randn((b, f, 1), generator=generator, dtype=x.dtype,
+                            device=None if generator is None else generator.device).to(x.device)
         h, _ = self.lstm(torch.cat([flat - k * mean, k, z], dim=2))
         return (mean + self.out(h)).reshape(x.shape)
 

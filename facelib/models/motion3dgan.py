@@ -90,18 +90,24 @@ class Motion3DGAN(nn.Module):
         return s - srvf.inner(s, self.reference)[:, None, None] * self.reference
 
     @torch.no_grad()
-    def generate(self, labels, seed=0):
-        """Landmark sequences (n, F, 68, 3) float32 in mm for class indices ``labels`` (n,)."""
-        labels = torch.as_tensor(np.asarray(labels), dtype=torch.long)
+    def sample(self, labels, seed=0):
+        """Landmark sequences (n, F, 68, 3) in mm, a tensor where the model is, for class indices ``labels`` (n,).
+        The draws are made on the CPU, so that a seed gives the same sequences on every device."""
         gen = torch.Generator().manual_seed(seed)
-        n, c = len(labels), self.config
-        z = torch.randn(n, c.noise_dim, generator=gen)
-        q = srvf.exp_map(self.tangent(z, nn.functional.one_hot(labels, c.num_classes).float()), self.reference)
-        start = self.neutrals[torch.randint(0, len(self.neutrals), (n,), generator=gen)].flatten(1)
+        n, c, device = len(labels), self.config, self.reference.device
+        labels = torch.as_tensor(np.asarray(labels), dtype=torch.long, device=device)
+        z = torch.randn(n, c.noise_dim, generator=gen).to(self.reference)
+        onehot = nn.functional.one_hot(labels, c.num_classes).to(self.reference.dtype)
+        q = srvf.exp_map(self.tangent(z, onehot), self.reference)
+        start = self.neutrals[torch.randint(0, len(self.neutrals), (n,), generator=gen).to(device)].flatten(1)
         motion = srvf.from_srvf(q, start, self.arc_length[labels]).reshape(n, c.num_frames, c.num_landmarks, 3)
-        reverse = torch.rand(n, generator=gen) < self.e2n_fraction[labels]
+        reverse = torch.rand(n, generator=gen).to(device) < self.e2n_fraction[labels]
         motion[reverse] = motion[reverse].flip(1)
-        return motion.numpy().astype(np.float32)
+        return motion
+
+    def generate(self, labels, seed=0):
+        """Landmark sequences (n, F, 68, 3) float32 in mm (numpy) for class indices ``labels`` (n,)."""
+        return self.sample(labels, seed).cpu().numpy().astype(np.float32)
 
 
 def smooth_in_time(motion, sigma):
@@ -109,7 +115,7 @@ def smooth_in_time(motion, sigma):
     if sigma <= 0:
         return motion
     r = max(1, int(3 * sigma))
-    kernel = torch.exp(-0.5 * (torch.arange(-r, r + 1, dtype=motion.dtype) / sigma) ** 2)
+    kernel = torch.exp(-0.5 * (torch.arange(-r, r + 1, dtype=motion.dtype, device=motion.device) / sigma) ** 2)
     x = nn.functional.pad(motion.transpose(1, 2), (r, r), mode="replicate")
     n, d, f = x.shape
     out = nn.functional.conv1d(x.reshape(n * d, 1, f), (kernel / kernel.sum())[None, None])

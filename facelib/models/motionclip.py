@@ -52,8 +52,9 @@ class TextToMotion(nn.Module):
 
     def decode(self, text_embeddings, num_frames):
         """Delta L (B, F, 68, 3) in normalised units."""
-        frames = torch.arange(1, num_frames + 1)
-        queries = sinusoidal_embedding(frames, self.config.width)[None].expand(len(text_embeddings), -1, -1)
+        frames = torch.arange(1, num_frames + 1, device=text_embeddings.device)
+        queries = sinusoidal_embedding(frames, self.config.width, dtype=text_embeddings.dtype)[None]
+        queries = queries.expand(len(text_embeddings), -1, -1)
         h = self.decoder(queries, self.text_in(text_embeddings)[:, None])
         return self.out(h).reshape(len(text_embeddings), num_frames, self.config.num_landmarks, 3)
 
@@ -63,7 +64,7 @@ class TextToMotion(nn.Module):
         e = torch.as_tensor(np.asarray(text_embeddings, dtype=np.float32))
         if e.ndim != 2 or e.shape[1] != self.config.embedding_dim:
             raise ValueError(f"text embeddings must be (n, {self.config.embedding_dim}), got {tuple(e.shape)}")
-        return (self.decode(e, num_frames) * self.scale + self.neutral).numpy().astype(np.float32)
+        return (self.decode(e.to(self.scale), num_frames) * self.scale + self.neutral).cpu().numpy().astype(np.float32)
 
 
 def config_dict(model):

@@ -106,8 +106,28 @@ def pool_index(level):
 
 
 def pool(x, level):
-    """(B, V_level, C) -> (B, V_{level+1}, C): keep the coarser grid's vertices."""
-    return torch.index_select(x, 1, torch.as_tensor(pool_index(level)))
+    """(B, V_level, C) -> (B, V_{level+1}, C): keep the coarser grid's vertices.  (A network pools with
+    :class:`Pool`, whose index is a buffer that moves with it; this copies the index to x's device.)"""
+    return torch.index_select(x, 1, torch.as_tensor(pool_index(level), device=x.device))
+
+
+class Pool(nn.Module):
+    """:func:`pool` as a module: the index of the kept vertices is a (non-persistent) buffer, so that
+    ``module.to(device)`` moves it with the network."""
+
+    def __init__(self, level):
+        super().__init__()
+        self.level = level
+        self.num_fine = len(tpl.get_template().levels[level].vertex_index)
+        self.register_buffer("index", torch.tensor(pool_index(level)), persistent=False)
+
+    def forward(self, x):
+        if x.shape[1] != self.num_fine:
+            raise ValueError(f"expected {self.num_fine} vertices of level {self.level}, got {x.shape[1]}")
+        return torch.index_select(x, 1, self.index)
+
+    def extra_repr(self):
+        return f"level={self.level}"
 
 
 def unpool(x, level):
