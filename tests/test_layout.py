@@ -62,3 +62,16 @@ def test_no_module_shadows_the_standard_library():
     import sys
     shadowing = [p.stem for p in ROOT.glob("*.py") if p.stem in sys.stdlib_module_names]
     assert not shadowing, f"facelib modules named like standard modules: {shadowing}"
+
+
+def test_the_packages_dependencies_are_pinned_as_requirements_txt():
+    """`pip install .` (pyproject.toml) and `make` (requirements.txt) install the same versions."""
+    import re
+    import tomllib
+    root = ROOT.parent
+    pins = dict(re.findall(r"^([A-Za-z0-9_.\-]+)==(\S+)", (root / "requirements.txt").read_text(), re.M))
+    declared = tomllib.loads((root / "pyproject.toml").read_text())["project"]["dependencies"]
+    assert declared, "pyproject.toml declares no runtime dependencies"
+    for requirement in declared:
+        name, version = requirement.split("==")
+        assert pins.get(name) == version, f"pyproject pins {requirement}, requirements.txt {pins.get(name)}"
