@@ -69,7 +69,8 @@ def main():
         print(rows[-1], flush=True)
     if args.save:
         results.save_result(args.save, "How far `animate` moves unseen faces at the apex", COLUMNS, rows,
-                            results.Run(allow_dirty=args.allow_dirty, checkpoints=["denoiser_coma", "guide_coma_S", "deform_ours_identity"],
+                            results.Run(allow_dirty=args.allow_dirty,
+                                        checkpoints=["denoiser_coma", "guide_coma_S", "deform_ours_identity"],
                                         seeds=list(range(args.faces * args.seeds)), n=args.faces * args.seeds,
                                         steps=[args.steps or config.GeometryAdaptive().steps],
                                         wall_time_s=time.perf_counter() - t_start),

@@ -77,7 +77,8 @@ def main():
         merged, provenance = results.merged_rows(args.save, rows)
         results.save_result(args.save, "Table 1 baselines: tuning sweep (coma, a fraction of the budget)", COLUMNS,
                             merged,
-                            results.Run(allow_dirty=args.allow_dirty, checkpoints=["ic_coma_I"], seeds=[0], n=len(labels), steps=[],
+                            results.Run(allow_dirty=args.allow_dirty,
+                                        checkpoints=["ic_coma_I"], seeds=[0], n=len(labels), steps=[],
                                         wall_time_s=time.perf_counter() - t_start),
                             notes=f"budget {args.budget} of each recipe's steps; {args.per_label} sequences per label; "
                                   "rows of candidates this run did not measure are those of earlier runs (the commit, "

@@ -28,7 +28,7 @@ COLUMNS = ["split", "method", "mean (mm)", "std over seeds (mm)", "seeds", "per-
 
 def checkpoints_of(method, split):
     """The shipped checkpoints of a method and split: seed 0 first."""
-    base = deformation.checkpoint_name(method, split)
+    base = deformation.deformer_checkpoint(method, split)
     return [base] + sorted(n for n in training.SHIPPED if n.startswith(base + "_seed"))
 
 
@@ -73,7 +73,8 @@ def main():
         coarse = deformation.load_deformer("ours", "identity").num_coarse
         results.save_result(args.save, "Table 5: per-vertex error over training seeds, with the closed-form "
                             "regression", COLUMNS, rows,
-                            results.Run(allow_dirty=args.allow_dirty, checkpoints=sorted(set(used)), seeds=seeds, n=tested, steps=[],
+                            results.Run(allow_dirty=args.allow_dirty,
+                                        checkpoints=sorted(set(used)), seeds=seeds, n=tested, steps=[],
                                         wall_time_s=time.perf_counter() - t_start),
                             notes=f"n: test sequences of both splits; {args.frames} evenly spaced frames each; "
                                   f"uniform attention over {coarse} coarse vertices: entropy "

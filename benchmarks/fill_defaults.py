@@ -75,7 +75,8 @@ def main():
     if args.save:
         path = results.save_result(
             args.save, "The fill default: seams, accuracy and FID of candidate settings (coma test split)", COLUMNS,
-            rows, results.Run(allow_dirty=args.allow_dirty, settings=(config.Fill(),), checkpoints=["denoiser_coma", "ic_coma_I"], seeds=[0], n=args.n,
+            rows, results.Run(allow_dirty=args.allow_dirty,
+                              settings=(config.Fill(),), checkpoints=["denoiser_coma", "ic_coma_I"], seeds=[0], n=args.n,
                               steps=sorted({s["steps"] for s in CANDIDATES.values()}),
                               wall_time_s=time.perf_counter() - t_start),
             notes=f"known frames {args.known}; seams within p95: every known/generated boundary moves at most the "

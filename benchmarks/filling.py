@@ -100,7 +100,8 @@ def main():
         path = results.save_result(
             args.save, title="Table 3, expression filling on the coma test split (IC type I)", columns=COLUMNS,
             rows=rows,
-            run=results.Run(allow_dirty=args.allow_dirty, checkpoints=["denoiser_coma", "lstm_filler_coma", "ic_coma_I"], seeds=[0], n=n,
+            run=results.Run(allow_dirty=args.allow_dirty,
+                            checkpoints=["denoiser_coma", "lstm_filler_coma", "ic_coma_I"], seeds=[0], n=n,
                             steps=sorted(set(args.steps)), wall_time_s=time.perf_counter() - t_start),
             notes=f"masks: inpainting.fill_masks(setting, n, 40, seed=0); sampler seed 0; RePaint r = {args.resample} "
                   f"and reconstruction guidance (zeta = {args.reconstruction_scale:g}) at {low} steps; intervals: "

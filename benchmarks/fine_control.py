@@ -176,7 +176,8 @@ def main():
                  "floor": "What the rig fit resolves: its error per AU on real test sequences",
                  "keyframes": "Landmark keyframes: constraint error, smoothness, realism"}[args.experiment]
         results.save_result(args.save, title, COLUMNS[args.experiment], rows,
-                            results.Run(allow_dirty=args.allow_dirty, checkpoints=checkpoints, seeds=SEEDS[args.experiment], n=args.n, steps=steps,
+                            results.Run(allow_dirty=args.allow_dirty,
+                                        checkpoints=checkpoints, seeds=SEEDS[args.experiment], n=args.n, steps=steps,
                                         wall_time_s=time.perf_counter() - t_start),
                             notes="; ".join(([] if evaluator is None else [
                                 "FID against the training split with the type-I IC of coma",

@@ -75,7 +75,8 @@ def main():
         path = results.save_result(
             args.save, title="Table 4, geometry-adaptive generation on the coma test split (IC type S), pass by pass",
             columns=COLUMNS, rows=table,
-            run=results.Run(allow_dirty=args.allow_dirty, checkpoints=["denoiser_coma", "guide_coma_S", "ic_coma_S"], seeds=[0], n=len(rows_sel),
+            run=results.Run(allow_dirty=args.allow_dirty,
+                            checkpoints=["denoiser_coma", "guide_coma_S", "ic_coma_S"], seeds=[0], n=len(rows_sel),
                             steps=[args.steps], wall_time_s=time.perf_counter() - t_start),
             notes=f"{args.per_class or 'all'} test sequences per type-S class, each from its own neutral frame; "
                   f"{args.passes} passes of Alg. 4 (re-noised to T), the last is what Alg. 4 returns; reconstruction "

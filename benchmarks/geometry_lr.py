@@ -56,7 +56,8 @@ def main():
         print(table[-1], flush=True)
     if args.save:
         results.save_result(args.save, "Alg. 4's Adagrad rate (coma test split, IC type S)", COLUMNS, table,
-                            results.Run(allow_dirty=args.allow_dirty, checkpoints=["denoiser_coma", "guide_coma_S", "ic_coma_S"], seeds=[0],
+                            results.Run(allow_dirty=args.allow_dirty,
+                                        checkpoints=["denoiser_coma", "guide_coma_S", "ic_coma_S"], seeds=[0],
                                         n=len(rows_sel), steps=[config.GeometryAdaptive().steps],
                                         wall_time_s=time.perf_counter() - t_start),
                             notes=f"{args.per_class} test sequences per type-S class; the book's Alg. 4 settings")

@@ -128,7 +128,8 @@ def main():
     if args.save:
         path = results.save_result(
             args.save, title=title, columns=columns, rows=rows,
-            run=results.Run(allow_dirty=args.allow_dirty, checkpoints=checkpoints, seeds=[args.seed], n=args.n, steps=args.steps, wall_time_s=wall),
+            run=results.Run(allow_dirty=args.allow_dirty,
+                            checkpoints=checkpoints, seeds=[args.seed], n=args.n, steps=args.steps, wall_time_s=wall),
             notes="mean RMSE (mm) to the closest training sequence over n sequences; "
                   "intervals: 95 % bootstrap over the sequences")
         print(f"saved {path}")

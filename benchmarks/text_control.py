@@ -139,7 +139,8 @@ def main():
         path = results.save_result(
             args.save, title=f"text control (Alg. 2), {task}, {args.split} texts, dataset {DATASET}", columns=COLUMNS,
             rows=rows,
-            run=results.Run(allow_dirty=args.allow_dirty, checkpoints=used + ([] if args.no_baselines else [f"motionclip_{DATASET}"]), seeds=[0],
+            run=results.Run(allow_dirty=args.allow_dirty,
+                            checkpoints=used + ([] if args.no_baselines else [f"motionclip_{DATASET}"]), seeds=[0],
                             n=args.n, steps=sorted(set(args.steps)), wall_time_s=time.perf_counter() - t_start),
             notes="texts cycle through the classes of the IC (then each class's texts of the split); GT: n test "
                   "sequences picked with numpy seed 0; sampler seed 0; lr: the Adagrad rate at that number of steps; "

@@ -17,7 +17,7 @@ import numpy as np
 import torch
 
 from . import data
-from .checkpoints import load_checkpoint
+from .checkpoints import checkpoint_name, load_checkpoint
 from .inpainting import check_fill_input, keep_known
 from .models import actor, lstm_filler, motion3dgan, motionclip
 from .text import get_encoder
@@ -36,7 +36,7 @@ def load_baseline(name, dataset="coma", checkpoint=None):
     """Load a shipped baseline (sha256 checked); ``model.label_names`` lists its labels."""
     module = check_baseline(name)
     data.check_dataset_name(dataset)
-    checkpoint = checkpoint or f"{name}_{dataset}"
+    checkpoint = checkpoint or checkpoint_name(name, dataset)
     model, meta = load_checkpoint(checkpoint, name, module.build)
     expected = list(data.load_dataset(dataset, "train").label_names)
     if meta["label_names"] != expected:
@@ -67,7 +67,7 @@ def generate_from_text(model, texts, num_frames=40, encoder=None):
 def load_filler(dataset="coma", checkpoint=None):
     """Load the shipped LSTM filler of a dataset (sha256 checked)."""
     data.check_dataset_name(dataset)
-    model, meta = load_checkpoint(checkpoint or f"lstm_filler_{dataset}", "lstm_filler",
+    model, meta = load_checkpoint(checkpoint or checkpoint_name("lstm_filler", dataset), "lstm_filler",
                                   lambda c: lstm_filler.LSTMFiller(lstm_filler.LSTMFillerConfig(**c)))
     model.normalizer, model.meta = data.LandmarkNormalizer.from_dict(meta["normalizer"]), meta
     return model.eval()

@@ -29,6 +29,24 @@ def checkpoint_paths(name):
     return stem.with_suffix(".pt"), stem.with_suffix(".json")
 
 
+NAMED_KINDS = ("denoiser", "guide", "au_regressor", "ic", "deform", "actor", "motion3dgan", "motionclip", "lstm_filler")
+
+
+def checkpoint_name(kind, dataset=None, variant=None, seed=0):
+    """The one place checkpoints are named (data/checkpoints/world<N>/NAME.pt):
+
+    denoiser_<dataset>[_<variant>] (variant "var": lengths 35-45, "cfg": label-conditional, "var_cfg"),
+    guide_<dataset>_<variant> (I, S or text), ic_<dataset>_<variant> (I or S), au_regressor_<dataset>,
+    <baseline>_<dataset> (actor, motion3dgan, motionclip, lstm_filler), deform_<method>_<split>[_seed<k>]
+    (``dataset`` the method, ``variant`` the split; seed 0 unnamed)."""
+    if kind not in NAMED_KINDS:
+        raise ValueError(f"unknown checkpoint kind {kind!r}; allowed: {', '.join(NAMED_KINDS)}")
+    if kind in ("guide", "ic", "deform") and variant is None:
+        raise ValueError(f"a {kind} checkpoint's name needs its variant (type or split)")
+    name = "_".join(str(part) for part in (kind, dataset, variant) if part)
+    return name + (f"_seed{seed}" if seed else "")
+
+
 def world_fingerprint():
     """The synthetic world this process builds: {"version": config.WORLD, "fingerprint": the first 12 hex
     digits of the sha256 of its committed dataset fingerprints (data/synthetic/fingerprints.json)}."""

@@ -10,12 +10,16 @@ from __future__ import annotations
 
 import argparse
 import json
+import zipfile
+import zlib
 from dataclasses import asdict, dataclass, fields, replace
+from pathlib import Path
 from typing import Callable
 
 import numpy as np
 
 from . import checkpoints, config, data, inpainting, tasks
+from .face.sequences import MAX_FRAMES, MIN_FRAMES
 from .training.loop import device_for
 
 FIELD_HELP = {  # one text per field name: a field means the same in every task's settings
@@ -64,7 +68,8 @@ TASK_HELP = {("keyframes", "method"): "replace (Alg. 3 on coordinates), reconstr
              ("au", "scale"): "the mean shift's gradient scale s",
              ("au", "lr"): "Adagrad learning rate ('none': the book's choice for the steps)"}
 CHOICES = {"variance": ("beta", "posterior"), "sampler": config.SAMPLERS, "dataset": data.DATASET_NAMES,
-           "guidance": config.LABEL_GUIDANCE, "classifier_type": data.CLASSIFIER_TYPES, "method": config.GUIDANCE_METHODS,
+           "guidance": config.LABEL_GUIDANCE, "classifier_type": data.CLASSIFIER_TYPES,
+           "method": config.GUIDANCE_METHODS,
            "score": config.TEXT_SCORES, "head_input": config.HEAD_INPUTS, "read": config.HEAD_INPUTS,
            "order": data.KIND_NAMES}
 TASK_CHOICES = {("keyframes", "method"): config.KEYFRAME_METHODS}
@@ -81,14 +86,20 @@ EDIT = ("edit --input seq.npz --label X --out edited.npz: each sequence is inver
 
 
 def read_npz_array(path, keys, what):
-    """The first of ``keys`` found in an .npz (a clear error naming the file and the keys otherwise)."""
+    """The first of ``keys`` found in an .npz, as float64 (a clear error naming the file and the keys otherwise,
+    and for a file that is not an .npz, is cut short, or holds something else than real numbers)."""
     try:
         with np.load(path) as f:
+            if not hasattr(f, "keys"):  # a .npy file: one array, no keys
+                raise ValueError("not an .npz archive")
             for key in keys:
                 if key in f:
-                    return np.asarray(f[key], dtype=np.float64)
+                    x = f[key]
+                    if x.dtype.kind not in "iuf":
+                        raise ValueError(f"{key!r} holds {x.dtype} values, not real numbers (landmarks in mm)")
+                    return x.astype(np.float64)
             found = list(f.keys())
-    except (OSError, ValueError, EOFError) as e:
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as e:
         raise ValueError(f"cannot read {what} from {path}: {e}") from None
     raise ValueError(f"{path} has no {' or '.join(repr(k) for k in keys)} array ({what}); it has {found}")
 
@@ -97,6 +108,9 @@ def _sequences(args, what):
     x = read_npz_array(args.input, ["landmarks"], what)
     if x.ndim not in (3, 4) or x.shape[-2:] != (68, 3) or 0 in x.shape:
         raise ValueError(f"{args.input}: 'landmarks' must be (F, 68, 3) or (n, F, 68, 3) in mm, got {x.shape}")
+    if not MIN_FRAMES <= x.shape[-3] <= MAX_FRAMES:
+        raise ValueError(f"{args.input}: 'landmarks' has {x.shape[-3]} frames; a sequence has {MIN_FRAMES} to "
+                         f"{MAX_FRAMES}")
     return x
 
 
@@ -226,7 +240,8 @@ def _converter(kind, name):
         try:
             return base(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"--{name.replace('_', '-')} must be {base.__name__ if base is not str else 'text'}"
+            what = "text" if base is str else base.__name__
+            raise argparse.ArgumentTypeError(f"--{name.replace('_', '-')} must be {what}"
                                              f"{' or none' if optional else ''}, got {text!r}") from None
     convert.__name__ = base.__name__
     return convert
@@ -305,11 +320,16 @@ def settings_of(args):
 
 def run(args):
     """Run the task of ``args`` and write its .npz (nothing is written when it fails)."""
-    if getattr(args, "n", 1) < 1:
-        raise ValueError(f"--n must be a positive number of sequences, got {args.n}")
+    if not 1 <= getattr(args, "n", 1) <= tasks.loading.MAX_SEQUENCES:
+        raise ValueError(f"--n must be a positive number of sequences (at most {tasks.loading.MAX_SEQUENCES}), "
+                         f"got {args.n}")
+    out = Path(args.out)
+    if out.suffix != ".npz" or out.is_dir() or not out.parent.is_dir():
+        raise ValueError(f"--out must name an .npz file in an existing folder, got {args.out!r}")
     settings, spec = settings_of(args), TASKS[args.task]
     cfg = getattr(settings, "guidance", None) == "cfg"
-    checkpoint = args.checkpoint or f"denoiser_{settings.dataset}" + ("_cfg" if cfg else "")
+    checkpoint = args.checkpoint or checkpoints.checkpoint_name("denoiser", settings.dataset,
+                                                                "cfg" if cfg else None)
     with checkpoints.recording() as used_checkpoints:
         if args.checkpoint is not None or not cfg:
             denoiser = tasks.load_denoiser(checkpoint)
@@ -327,6 +347,9 @@ def run(args):
             **({"method": settings.guidance_method} if hasattr(settings, "guidance_method") else {}),
             **{k: getattr(args, k) for k in ("label", "text", "input", "known", "neutral", "curve", "constraints")
                if hasattr(args, k)}}
+    if not np.isfinite(landmarks).all():  # nothing written: a file of NaN would pass for a result
+        raise ValueError(f"the {args.task} task returned NaN or infinite landmarks with these settings; nothing was "
+                         f"written to {args.out}")
     np.savez(args.out, landmarks=landmarks.astype(np.float32), config=json.dumps(used),
              **{k: np.asarray(v) for k, v in extra.items()})
     print(f"wrote {args.out}: landmarks {landmarks.shape} float32 (mm); config {used}")

@@ -11,6 +11,9 @@ from dataclasses import dataclass, fields, replace
 from pathlib import Path
 
 PROJECT_ROOT = Path(__file__).resolve().parent.parent
+NUM_LANDMARKS = 68  # the iBUG-68 landmarks a frame holds (paper §3.1)
+NUM_FRAMES = 40  # frames per sequence (paper §4)
+NUM_DIFFUSION_STEPS = 2000  # T of the paper's chain (paper §4)
 # The shipped checkpoints and dataset fingerprints live in the repository's data/, not in the package: `pip install
 # .` installs code only, and FACELIB_DATA_DIR then names a clone's data/ (checkpoints.load_checkpoint says so).
 DATA_DIR = Path(os.environ.get("FACELIB_DATA_DIR", PROJECT_ROOT / "data"))
@@ -55,7 +58,7 @@ class DatasetSpec:
     style_leak_probability: float
     style_leak_max: float
     style_blend_max: float
-    num_frames: int = 40  # paper §4: sequences of 40 frames
+    num_frames: int = NUM_FRAMES  # paper §4: sequences of 40 frames
 
 
 DATASETS = {
@@ -150,8 +153,8 @@ class DenoiserTraining(Optimisation):
     grad_clip: float | None = 1.0  # our choice: stabilises the first steps
     ema_decay: float | None = 0.999  # our choice: visibly cleaner samples for short runs
     dataset: str = "coma"  # paper §4: "unless otherwise specified, solely CoMA"
-    num_frames: object = 40  # paper §4: 40 frames; (35, 45) for the variable-length model of App. A
-    num_diffusion_steps: int = 2000  # paper §4: T = 2000
+    num_frames: object = NUM_FRAMES  # paper §4: 40 frames; (35, 45) for the variable-length model of App. A
+    num_diffusion_steps: int = NUM_DIFFUSION_STEPS  # paper §4: T = 2000
     schedule: str = "linear"  # paper §4: linear betas from 1e-4 to 0.02
     anatomy_pool: tuple = ("coma", "bu")  # our choice: training faces of these datasets (9 + 81)
     anatomy_swap: float = 0.5  # our choice: probability that a sequence gets another anatomy
@@ -178,7 +181,7 @@ class GuideTraining(Optimisation):
     grad_clip: float | None = 1.0
     dataset: str = "coma"
     classifier_type: str = "I"  # paper §5.1: type I for label control, type S for Alg. 4
-    num_diffusion_steps: int = 2000  # the DDPM's schedule (paper §4): x_t must look like the sampler's
+    num_diffusion_steps: int = NUM_DIFFUSION_STEPS  # the DDPM's schedule (paper §4): x_t must look like the sampler's
     schedule: str = "linear"
 
 
@@ -194,7 +197,7 @@ class AURegressorTraining(Optimisation):
     weight_decay: float = 0.01
     grad_clip: float | None = 1.0
     dataset: str = "coma"  # the unconditional DDPM it steers (denoiser_coma)
-    num_diffusion_steps: int = 2000  # the DDPM's schedule: x_t must look like the sampler's
+    num_diffusion_steps: int = NUM_DIFFUSION_STEPS  # the DDPM's schedule: x_t must look like the sampler's
     schedule: str = "linear"
 
 
@@ -211,7 +214,7 @@ class TextHeadTraining(Optimisation):
     dataset: str = "coma+bu"  # paper §5.2: CoMA and BU-4DFE merged (18 actions)
     contrastive_weight: float = 1.0  # our addition (0 = the paper's cosine loss alone): see training.recipes
     temperature: float = 0.05  # of the contrastive term (CLIP learns 0.01; 0.07 at its start)
-    num_diffusion_steps: int = 2000
+    num_diffusion_steps: int = NUM_DIFFUSION_STEPS
     schedule: str = "linear"
 
 
@@ -388,8 +391,9 @@ def _check_choice(name, value, allowed):
 def _check_number(name, value, low=0.0, allow_none=False):
     if value is None and allow_none:
         return
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not value >= low:
-        raise ValueError(f"{name} must be a {'non-negative number' if low == 0 else f'number >= {low}'}, got {value!r}")
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not low <= value <= 3.4e38:
+        raise ValueError(f"{name} must be a {'non-negative number' if low == 0 else f'number >= {low}'} (and finite, "
+                         f"at most 3.4e38: the networks compute in float32), got {value!r}")
 
 
 SAMPLERS = ("ddpm", "ddim")
@@ -400,7 +404,7 @@ class Sampling:
     """What every sampling task shares: the chain's length, the sequences' length, the seed."""
 
     steps: int | None = None
-    num_frames: int = 40  # paper §4: 40 frames
+    num_frames: int = NUM_FRAMES  # paper §4: 40 frames
     seed: int = 0
     variance: str | None = None  # the sampler's sigma_t^2: "beta" (paper §4), "posterior" (beta~_t); None: the model's
     sampler: str = "ddpm"  # "ddpm": the ancestral step of Eq. 5 (paper); "ddim": DDIM's step (Song et al. 2021)
@@ -417,8 +421,8 @@ class Sampling:
         if self.steps is not None:
             _check_positive_int("steps", self.steps)
         _check_positive_int("num_frames", self.num_frames)
-        if isinstance(self.seed, bool) or not isinstance(self.seed, int):
-            raise ValueError(f"seed must be an integer, got {self.seed!r}")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or not 0 <= self.seed < 2 ** 32:
+            raise ValueError(f"seed must be an integer in 0..2**32 - 1, got {self.seed!r}")
 
     @property
     def ddim_eta(self):

@@ -29,7 +29,7 @@ import torch
 
 from . import data, metrics
 from .config import DEFORMATION_DATASET as DATASET, HELD_OUT_EXPRESSIONS
-from .checkpoints import checkpoint_paths, load_checkpoint
+from .checkpoints import checkpoint_name, checkpoint_paths, load_checkpoint
 from .face import template as tpl
 from .face.template import check_neutral_mesh
 from .models import coma, deformer, linear_deformer
@@ -124,13 +124,14 @@ def loss_weights():
     return torch.as_tensor(deformer.landmark_weights(t.vertices, t.landmark_index))
 
 
-def checkpoint_name(method, split):
-    return f"deform_{check_method(method)}_{check_split(split)}"
+def deformer_checkpoint(method, split, seed=0):
+    """The name of the deformer checkpoint of a Table 5 row (method) and split (checkpoints.checkpoint_name)."""
+    return checkpoint_name("deform", check_method(method), check_split(split), seed)
 
 
 def load_deformer(method="ours", split="identity", checkpoint=None):
     """Load a shipped deformation network (sha256 checked); ``model.meta`` holds its metadata."""
-    name = checkpoint or checkpoint_name(method, split)
+    name = checkpoint or deformer_checkpoint(method, split)
     module = METHODS[check_method(method)][0]
     _, js = checkpoint_paths(name)
     held = json.loads(js.read_text()).get("method") if js.exists() else method  # (missing: load_checkpoint says so)

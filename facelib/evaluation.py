@@ -19,7 +19,7 @@ import numpy as np
 import torch
 
 from . import data, metrics
-from .checkpoints import load_checkpoint
+from .checkpoints import checkpoint_name, load_checkpoint
 from .face.aus import AU_NAMES
 from .models.classifier import LSTMClassifier
 
@@ -108,7 +108,7 @@ def load_evaluator(dataset="coma", classifier_type="I", name=None):
     """Load the shipped IC ic_<dataset>_<type> (sha256 checked) and the training features for FID."""
     data.check_dataset_name(dataset)
     data.check_classifier_type(classifier_type)
-    name = name or f"ic_{dataset}_{classifier_type}"
+    name = name or checkpoint_name("ic", dataset, classifier_type)
     model, meta = load_checkpoint(name, "evaluator", lambda c: LSTMClassifier(**c))
     names = data.check_class_names(meta["class_names"], dataset, classifier_type, name)
     evaluator = Evaluator(model, dataset, classifier_type, names, np.zeros((0, len(names))))

@@ -25,6 +25,32 @@ import torch
 from .diffusion import GaussianDiffusion
 
 FILL_SETTINGS = ("FFB", "FFE", "FFM")  # §5.3: filling from the beginning, the end, the middle
+LANDMARK_LIMIT_MM = 1e4  # no landmark of a face in mm lies 10 m from the origin: a larger coordinate is another
+# unit or a corrupt file (and beyond 3.4e38 it would not even fit the float32 the samplers return)
+
+
+def landmark_array(values, what):
+    """``values`` as a float64 array: a clear error naming ``what`` for text, objects, booleans, complex
+    numbers, ragged lists or anything else that is not an array of real numbers."""
+    try:
+        raw = np.asarray(values)
+    except (ValueError, TypeError) as e:  # ragged lists
+        raise ValueError(f"{what} must be an array of numbers (landmarks in mm), got {type(values).__name__}: "
+                         f"{e}") from None
+    if raw.dtype.kind not in "iuf":
+        raise ValueError(f"{what} must be an array of real numbers (landmarks in mm), got "
+                         f"{type(values).__name__} of dtype {raw.dtype}")
+    return raw.astype(np.float64)
+
+
+def check_finite_landmarks(x, what):
+    """A clear error when landmark coordinates ``x`` (mm) hold NaN, infinities or values beyond
+    :data:`LANDMARK_LIMIT_MM`."""
+    if not np.isfinite(x).all():
+        raise ValueError(f"{what} contain NaN or infinite values")
+    if x.size and np.abs(x).max() > LANDMARK_LIMIT_MM:
+        raise ValueError(f"{what} reach {np.abs(x).max():.3g} mm: landmark coordinates must be in mm, within "
+                         f"+-{LANDMARK_LIMIT_MM:g}")
 
 
 def check_known_mask(mask, num_frames=None):
@@ -165,15 +191,14 @@ def keep_known(filled, given, known):
 def check_fill_input(sequences, known):
     """(x, mask) as (n, F, 68, 3) float64 and (n, F) bool.  The unknown frames may hold anything
     (even NaN): they are set to zero here, so that nothing of them can reach a filler."""
-    x = np.asarray(sequences, dtype=np.float64)
+    x = landmark_array(sequences, "the landmark sequences")
     if x.ndim == 3:
         x = x[None]
-    if x.ndim != 4 or x.shape[2:] != (68, 3):
+    if x.ndim != 4 or x.shape[2:] != (68, 3) or 0 in x.shape:
         raise ValueError(f"expected landmark sequences (n, frames, 68, 3) or (frames, 68, 3), got {np.shape(sequences)}")
     m = check_known_mask(known, x.shape[1])
     m = np.broadcast_to(m, x.shape[:2]).copy() if m.ndim == 1 else m
     if m.shape != x.shape[:2]:
         raise ValueError(f"mask {m.shape} does not match {len(x)} sequences of {x.shape[1]} frames")
-    if not np.isfinite(x[m]).all():
-        raise ValueError("the known frames contain NaN or infinite values")
+    check_finite_landmarks(x[m], "the known frames")
     return np.where(m[..., None, None], x, 0.0), m

@@ -15,6 +15,22 @@ def _unit(module):
     return parts[1] if len(parts) > 1 else None
 
 
+def _targets(node, package):
+    """The facelib modules an import node names (none for other nodes): every spelling, `from facelib import x`,
+    `import facelib.x`, `from facelib.x import y` and relative imports from ``package``."""
+    if isinstance(node, ast.ImportFrom) and node.level:
+        base = package.split(".")[:len(package.split(".")) - node.level + 1]
+        names = [node.module] if node.module else [a.name for a in node.names]
+        return [".".join(base + [name]) for name in names]
+    if isinstance(node, ast.ImportFrom) and node.module == "facelib":  # from facelib import tasks
+        return [f"facelib.{a.name}" for a in node.names]
+    if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("facelib"):
+        return [node.module]
+    if isinstance(node, ast.Import):
+        return [a.name for a in node.names if a.name.startswith("facelib")]
+    return []
+
+
 def _imports():
     """(source file, source unit, imported facelib module, line, inside a function) for every import."""
     for path in sorted(ROOT.rglob("*.py")):
@@ -25,17 +41,7 @@ def _imports():
         inside = {id(n) for f in ast.walk(tree) if isinstance(f, (ast.FunctionDef, ast.AsyncFunctionDef))
                   for n in ast.walk(f)}
         for node in ast.walk(tree):
-            if isinstance(node, ast.ImportFrom) and node.level:
-                base = package.split(".")[:len(package.split(".")) - node.level + 1]
-                names = [node.module] if node.module else [a.name for a in node.names]
-                targets = [".".join(base + [name]) for name in names]
-            elif isinstance(node, ast.ImportFrom) and (node.module or "").startswith("facelib"):
-                targets = [node.module]
-            elif isinstance(node, ast.Import):
-                targets = [a.name for a in node.names if a.name.startswith("facelib")]
-            else:
-                continue
-            for target in targets:
+            for target in _targets(node, package):
                 yield path.relative_to(ROOT.parent), _unit(module), target, node.lineno, id(node) in inside
 
 
@@ -45,11 +51,28 @@ def test_every_unit_of_the_package_has_a_layer():
     assert units == set(LAYERS), f"give these a layer in facelib/__init__.py's map: {units ^ set(LAYERS)}"
 
 
+def allowed_imports(unit):
+    """The units ``unit`` may import: those of a lower layer (and its own modules, e.g. tasks.au from tasks.fill);
+    never a sibling of the same layer (deformation and evaluation are both layer 5: neither imports the other)."""
+    return sorted(u for u, layer in LAYERS.items() if layer < LAYERS[unit])
+
+
 def test_imports_point_down_the_map():
-    upward = [f"{path}:{line} imports {target} (layer {LAYERS[_unit(target)]}) from layer {LAYERS[unit]}"
+    upward = [f"{path}:{line} imports {target} (layer {LAYERS[_unit(target)]}) from {unit} (layer {LAYERS[unit]}); "
+              f"{unit} may import {', '.join(allowed_imports(unit))}"
               for path, unit, target, line, _ in _imports()
               if unit is not None and _unit(target) not in (None, unit) and LAYERS[_unit(target)] >= LAYERS[unit]]
     assert not upward, "imports that point up or sideways:\n" + "\n".join(upward)
+
+
+def test_the_layout_check_sees_every_spelling_of_an_import(tmp_path):
+    """`from facelib import tasks`, `import facelib.tasks`, `from ..tasks import x` and `from facelib.tasks import x`
+    all name the unit imported."""
+    source = ("from facelib import tasks, data\nimport facelib.viz\nfrom facelib.tasks.fill import fill\n"
+              "from .. import metrics\nfrom ..guidance import chain\n")
+    seen = [t for node in ast.walk(ast.parse(source)) for t in _targets(node, "facelib.deformation")]
+    assert {_unit(t) for t in seen} == {"tasks", "data", "viz", "metrics", "guidance"}
+    assert "evaluation" not in allowed_imports("deformation") and "data" in allowed_imports("deformation")
 
 
 def test_no_facelib_import_hides_inside_a_function():

@@ -14,11 +14,12 @@ import numpy as np
 import torch
 
 from .. import data, rig_fit
-from ..config import (AU_ACTIVE, AU_CURVE_LR, AU_MEASURABLE_FIT_ERROR, AU_REQUEST_PEAK, AU_REQUEST_PEAK_FRAMES,
+from ..config import (NUM_FRAMES, NUM_LANDMARKS, AU_ACTIVE, AU_CURVE_LR, AU_MEASURABLE_FIT_ERROR, AU_REQUEST_PEAK,
+                      AU_REQUEST_PEAK_FRAMES,
                       AUControl)
 from ..face.aus import AU_NAMES
 from ..guidance import AUCurveScore, MeanShiftGuidance, OptimisationGuidance, ReconstructionGuidance, chain
-from ..inpainting import KnownFrames, keep_known
+from ..inpainting import KnownFrames, check_finite_landmarks, keep_known, landmark_array
 from .fill import known_noise
 from .label import step_scaled_lr
 from .loading import guided_chain, load_au_regressor, task_settings
@@ -46,7 +47,7 @@ def data_ranges(dataset="coma"):
     return {name: (float(w[..., k].min()), float(w[..., k].max())) for k, name in enumerate(AU_NAMES)}
 
 
-def parse_curve(spec, num_frames=40, ranges=None):
+def parse_curve(spec, num_frames=NUM_FRAMES, ranges=None):
     """One request ``NAME:value@frame,...`` or ``NAME:value`` -> (the AU names it constrains, the curve (F,)).
     ``ranges`` ({AU: (low, high)}, e.g. :func:`data_ranges`) bounds the values; a clear error for an unknown
     AU, a frame outside 0..F-1, a repeated frame, a value outside the range or a malformed spec."""
@@ -64,6 +65,8 @@ def parse_curve(spec, num_frames=40, ranges=None):
     except (ValueError, IndexError):
         raise ValueError(f"AU curve {spec!r}: write each key as value@frame (e.g. AU12:0@0,0.8@20) or one "
                          f"constant value (e.g. AU26:0)") from None
+    if not np.isfinite(values).all():
+        raise ValueError(f"AU curve {spec!r}: the values must be finite intensities")
     if frames.min() < 0 or frames.max() >= num_frames or len(set(frames.tolist())) != len(frames):
         raise ValueError(f"AU curve {spec!r}: key frames must be distinct, in 0..{num_frames - 1}")
     for n in names if ranges else ():
@@ -75,10 +78,10 @@ def parse_curve(spec, num_frames=40, ranges=None):
     return names, np.interp(np.arange(num_frames), frames[order], values[order])
 
 
-def requested_curves(specs, num_frames=40, ranges=None):
+def requested_curves(specs, num_frames=NUM_FRAMES, ranges=None):
     """Curves (F, A) and the mask (F, A) of the AUs they constrain, for a list of :func:`parse_curve` specs
     (an AU named twice is an error)."""
-    if isinstance(specs, str) or not specs:
+    if not isinstance(specs, (list, tuple)) or not specs:
         raise ValueError(f"give a list of AU curves (e.g. ['AU12:0@0,0.8@20', 'AU26:0']), got {specs!r}")
     curves, mask = np.zeros((num_frames, len(AU_NAMES))), np.zeros((num_frames, len(AU_NAMES)), dtype=bool)
     for spec in specs:
@@ -101,7 +104,10 @@ def au_control(curves, n=16, neutral=None, settings=AUControl(), denoiser=None, 
     settings, shape = task_settings(settings, overrides, n)
     regressor = regressor or load_au_regressor(settings.dataset)
     ranges = data_ranges(settings.dataset)
-    per_sequence = curves if curves and not isinstance(curves[0], str) else [curves] * n
+    if not isinstance(curves, (list, tuple)) or not curves:
+        raise ValueError(f"curves must be a list of AU curves (e.g. ['AU12:0@0,0.8@20', 'AU26:0']) or a list of n "
+                         f"such lists, got {curves!r}")
+    per_sequence = curves if not isinstance(curves[0], str) else [curves] * n
     if len(per_sequence) != n:
         raise ValueError(f"give one request for all sequences or one per sequence (n={n}), got {len(per_sequence)}")
     target, mask = map(np.stack, zip(*(requested_curves(c, settings.num_frames, ranges) for c in per_sequence)))
@@ -136,11 +142,12 @@ def no_au_score(x, t):
 def neutral_frame(neutral, shape):
     """The given frames (n, F, 68, 3) and the known mask (n, F) of a face's neutral landmarks (68, 3) or
     (n, 68, 3) put at frame 0 (a clear error for another shape or a non-finite value)."""
-    x = np.asarray(neutral, dtype=np.float64)
-    x = np.broadcast_to(x, (shape[0], 68, 3)) if x.shape == (68, 3) else x
-    if x.shape != (shape[0], 68, 3) or not np.isfinite(x).all():
+    x = landmark_array(neutral, "the neutral face")
+    x = np.broadcast_to(x, (shape[0], NUM_LANDMARKS, 3)) if x.shape == (NUM_LANDMARKS, 3) else x
+    if x.shape != (shape[0], NUM_LANDMARKS, 3) or not np.isfinite(x).all():
         raise ValueError(f"the neutral face must be finite landmarks of shape (68, 3) or (n={shape[0]}, 68, 3), "
                          f"got {np.shape(neutral)}")
+    check_finite_landmarks(x, "the neutral face's landmarks")
     given, known = np.zeros(shape), np.zeros(shape[:2], dtype=bool)
     given[:, 0], known[:, 0] = x, True
     return given, known
@@ -192,7 +199,7 @@ def measurable_aus(floor, dataset="coma", max_error=AU_MEASURABLE_FIT_ERROR):
     return [a for a, e in floor.items() if e <= max_error and ranges[a][1] >= 0.5 and a != "AU45"]
 
 
-def curve_errors(fitted, requests, num_frames=40):
+def curve_errors(fitted, requests, num_frames=NUM_FRAMES):
     """Mean absolute error (intensity units) per sequence between fitted curves (n, F, A) and the requests
     (one list of specs per sequence), over the constrained frames and AUs only."""
     out = []
@@ -223,7 +230,7 @@ def never_together(dataset="coma", active=AU_ACTIVE):
 
 
 def random_requests(n, seed=0, dataset="coma", aus=None, pairs=None, low=AU_REQUEST_PEAK[0],
-                    high=AU_REQUEST_PEAK[1], peak_frames=AU_REQUEST_PEAK_FRAMES, num_frames=40):
+                    high=AU_REQUEST_PEAK[1], peak_frames=AU_REQUEST_PEAK_FRAMES, num_frames=NUM_FRAMES):
     """n random requests within the data's range: one AU (of ``aus``; default, every AU the data push to at
     least 0.5) or one pair of ``pairs``, each a curve from 0 at frame 0 up to a peak in [low, min(high, the
     data's highest)] at a frame in ``peak_frames`` (first, last), then to a value between 0 and the peak at the

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from ..checkpoints import checkpoint_name
 from ..baselines import generate_from_text, load_baseline
 from ..config import DecoderThenDiffusion
 from .loading import load_denoiser, task_settings
@@ -23,7 +24,7 @@ def decoder_then_diffusion(text, n=8, settings=DecoderThenDiffusion(), denoiser=
     settings, shape = task_settings(settings, overrides, n)
     texts, dataset = text_list(text, n), settings.dataset
     decoder = decoder or load_baseline("motionclip", dataset)
-    denoiser = denoiser or load_denoiser(f"denoiser_{dataset}")
+    denoiser = denoiser or load_denoiser(checkpoint_name("denoiser", dataset))
     if denoiser.meta["training"]["dataset"] != dataset:
         raise ValueError(f"the denoiser was trained on {denoiser.meta['training']['dataset']!r}, the decoder's "
                          f"sequences are of {dataset!r}: use denoiser_{dataset}")

@@ -11,9 +11,9 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from ..config import Edit
+from ..config import NUM_LANDMARKS, Edit
 from ..guidance import ClassifierFree
-from ..inpainting import keep_known, parse_ranges
+from ..inpainting import check_finite_landmarks, keep_known, landmark_array, parse_ranges
 from .label import check_labels, label_sampler
 from .loading import task_settings
 
@@ -21,11 +21,10 @@ from .loading import task_settings
 def check_sequences(sequences):
     """Landmark sequences (F, 68, 3) or (n, F, 68, 3) in mm as (n, F, 68, 3) float64 (a clear error for another
     shape or a value that is not finite)."""
-    x = np.asarray(sequences, dtype=np.float64)
-    if x.ndim not in (3, 4) or x.shape[-2:] != (68, 3):
+    x = landmark_array(sequences, "the sequences to edit")
+    if x.ndim not in (3, 4) or x.shape[-2:] != (NUM_LANDMARKS, 3) or 0 in x.shape:
         raise ValueError(f"the sequences to edit must be (F, 68, 3) or (n, F, 68, 3) landmarks in mm, got {x.shape}")
-    if not np.all(np.isfinite(x)):
-        raise ValueError("the sequences to edit hold NaN or infinite values")
+    check_finite_landmarks(x, "the sequences to edit")
     return x[None] if x.ndim == 3 else x
 
 

@@ -3,7 +3,9 @@ from __future__ import annotations
 
 import torch
 
+from ..checkpoints import checkpoint_name
 from ..config import Fill, with_overrides
+from ..face.sequences import check_num_frames
 from ..guidance import ReconstructionGuidance
 from ..inpainting import KnownFrames, check_fill_input, keep_known
 from .loading import load_denoiser
@@ -25,7 +27,8 @@ def fill(sequences, known, settings=Fill(), denoiser=None, progress=True, callba
     as printed.  Returns (n, F, 68, 3) float32 in mm whose known frames equal the given ones exactly."""
     settings = with_overrides(settings, overrides)
     x, mask = check_fill_input(sequences, known)
-    denoiser = denoiser or load_denoiser(f"denoiser_{settings.dataset}")
+    check_num_frames(x.shape[1])
+    denoiser = denoiser or load_denoiser(checkpoint_name("denoiser", settings.dataset))
     diffusion = denoiser.diffusion_with(settings.steps, settings.variance, settings.ddim_eta)
     x0, mask_t = denoiser.to_model(x), torch.as_tensor(mask).to(denoiser.device)
     reconstruction = (ReconstructionGuidance(denoiser.model, diffusion, x0, mask_t, settings.reconstruction_scale)

@@ -6,9 +6,9 @@ import numpy as np
 import torch
 
 from .. import data
-from ..config import GeometryAdaptive
+from ..config import NUM_LANDMARKS, GeometryAdaptive
 from ..guidance import ClassifierScore, OptimisationGuidance, ReconstructionGuidance, chain
-from ..inpainting import KnownFrames, keep_known
+from ..inpainting import KnownFrames, check_finite_landmarks, keep_known, landmark_array
 from .fill import known_noise
 from .loading import guided_chain, load_guide, task_settings
 
@@ -18,6 +18,9 @@ def order_sensitive_label(label, order=None):
     if not isinstance(label, str):
         raise ValueError(f"label must be a label name, got {label!r}")
     parts = label.split()
+    if len(parts) not in (1, 2):
+        raise ValueError(f"label must be an expression label, e.g. 'mouth_open', or a label and its order, e.g. "
+                         f"'mouth_open E2N', got {label!r}")
     if len(parts) == 2:
         if order is not None and order != parts[1]:
             raise ValueError(f"label {label!r} already names the order, which differs from order={order!r}")
@@ -32,17 +35,16 @@ def _known_neutral(neutral_landmarks, names, num_frames):
     """The given frames (n, F, 68, 3) in mm and the mask S_K (n, F): the neutral face is frame 1 for N2E
     and frame F for E2N (§5.4)."""
     n = len(names)
-    neutral = np.asarray(neutral_landmarks, dtype=np.float64)
-    if neutral.shape == (68, 3):
-        neutral = np.broadcast_to(neutral, (n, 68, 3))
-    if neutral.shape != (n, 68, 3):
+    neutral = landmark_array(neutral_landmarks, "the neutral landmarks")
+    if neutral.shape == (NUM_LANDMARKS, 3):
+        neutral = np.broadcast_to(neutral, (n, NUM_LANDMARKS, 3))
+    if neutral.shape != (n, NUM_LANDMARKS, 3):
         raise ValueError(f"neutral landmarks must have shape (68, 3) or (n={n}, 68, 3), "
                          f"got {np.shape(neutral_landmarks)}")
-    if not np.isfinite(neutral).all():
-        raise ValueError("the neutral landmarks contain NaN or infinite values")
+    check_finite_landmarks(neutral, "the neutral landmarks")
     mask = np.zeros((n, num_frames), dtype=bool)
     mask[np.arange(n), [0 if y.endswith("N2E") else -1 for y in names]] = True
-    given = np.zeros((n, num_frames, 68, 3))
+    given = np.zeros((n, num_frames, NUM_LANDMARKS, 3))
     given[mask] = neutral
     return given, mask
 
@@ -69,6 +71,8 @@ def geometry_passes(neutral_landmarks, label, n=1, settings=GeometryAdaptive(), 
     adds reconstruction guidance after the label guidance, joining the generated frames to the given face;
     ``settings.paper()`` is Alg. 4 as printed); ``overrides`` change single fields."""
     settings, shape = task_settings(settings, overrides, n)
+    if not isinstance(label, (str, list, tuple)):
+        raise ValueError(f"label must be a label name or a list of n={n} label names, got {label!r}")
     names = [order_sensitive_label(y, settings.order) for y in ([label] * n if isinstance(label, str) else list(label))]
     if len(names) != n:
         raise ValueError(f"label must be a label name or a list of n={n} label names, got {len(names)} labels")

@@ -22,10 +22,11 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from ..checkpoints import checkpoint_name
 from .. import data
-from ..config import KEYFRAME_TOLERANCE, Keyframes
+from ..config import NUM_FRAMES, NUM_LANDMARKS, KEYFRAME_TOLERANCE, Keyframes
 from ..guidance import ReconstructionGuidance
-from ..inpainting import KnownFrames
+from ..inpainting import LANDMARK_LIMIT_MM, KnownFrames, check_finite_landmarks, landmark_array
 from .fill import known_noise
 from .loading import load_denoiser, task_settings
 
@@ -33,27 +34,32 @@ KEY_FIELDS = ("frame", "landmark")
 KEY_TARGETS = ("position", "displacement")
 
 
-def check_keys(keys, num_frames=40, neutral=None):
+def check_keys(keys, num_frames=NUM_FRAMES, neutral=None):
     """The keys (a list of dicts, see the module docstring) as targets (F, 68, 3) in mm and their mask (F, 68);
     with a neutral face (68, 3), frame 0 is that face and displacements are taken from it.  A clear error for a
     missing field, a frame or landmark out of range, a key given twice or a displacement without a face."""
     if not isinstance(keys, (list, tuple)) or not keys:
         raise ValueError(f"keys must be a non-empty list of {{'frame', 'landmark', 'position' or 'displacement'}}, "
                          f"got {keys!r}")
-    given, mask = np.zeros((num_frames, 68, 3)), np.zeros((num_frames, 68), dtype=bool)
+    given, mask = np.zeros((num_frames, NUM_LANDMARKS, 3)), np.zeros((num_frames, NUM_LANDMARKS), dtype=bool)
     if neutral is not None:
         given[0], mask[0] = neutral, True
     for key in keys:
         targets = [k for k in KEY_TARGETS if isinstance(key, dict) and k in key]
         if not isinstance(key, dict) or any(k not in key for k in KEY_FIELDS) or len(targets) != 1:
             raise ValueError(f"a key needs 'frame', 'landmark' and one of 'position' or 'displacement', got {key!r}")
-        frame, landmark, value = key["frame"], key["landmark"], np.asarray(key[targets[0]], dtype=np.float64)
-        if not isinstance(frame, int) or not 0 <= frame < num_frames:
+        frame, landmark = key["frame"], key["landmark"]
+        try:
+            value = landmark_array(key[targets[0]], f"key {key!r}: the {targets[0]}")
+        except ValueError as e:
+            raise ValueError(f"{e}; it must be 3 finite numbers (mm)") from None
+        if isinstance(frame, bool) or not isinstance(frame, int) or not 0 <= frame < num_frames:
             raise ValueError(f"key {key!r}: the frame must be an integer in 0..{num_frames - 1}")
-        if not isinstance(landmark, int) or not 0 <= landmark < 68:
+        if isinstance(landmark, bool) or not isinstance(landmark, int) or not 0 <= landmark < NUM_LANDMARKS:
             raise ValueError(f"key {key!r}: the landmark must be an iBUG-68 index in 0..67")
-        if value.shape != (3,) or not np.isfinite(value).all():
-            raise ValueError(f"key {key!r}: the {targets[0]} must be 3 finite numbers (mm)")
+        if value.shape != (3,) or not np.isfinite(value).all() or np.abs(value).max() > LANDMARK_LIMIT_MM:
+            raise ValueError(f"key {key!r}: the {targets[0]} must be 3 finite numbers (mm, within "
+                             f"+-{LANDMARK_LIMIT_MM:g})")
         if mask[frame, landmark]:
             raise ValueError(f"landmark {landmark} at frame {frame} is constrained twice (or is the neutral face)")
         if targets[0] == "displacement" and neutral is None:
@@ -66,9 +72,11 @@ def check_keys(keys, num_frames=40, neutral=None):
 def read_constraints(path):
     """(keys, neutral (68, 3) or None) from a constraints JSON file (schema in the module docstring)."""
     try:
-        spec = json.loads(Path(path).read_text())
-    except json.JSONDecodeError as e:
+        spec = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
         raise ValueError(f"{path} is not valid JSON: {e}") from None
+    except OSError as e:  # absent, a folder, unreadable
+        raise ValueError(f"cannot read the constraints file {path}: {e}") from None
     if not isinstance(spec, dict) or "keys" not in spec or set(spec) - {"keys", "neutral"}:
         raise ValueError(f"{path}: expected an object with 'keys' (a list) and optionally 'neutral' (68 x 3)")
     neutral = spec.get("neutral")
@@ -77,9 +85,10 @@ def read_constraints(path):
 
 def check_neutral(neutral):
     """A neutral face's landmarks as a finite (68, 3) array (a clear error otherwise)."""
-    x = np.asarray(neutral, dtype=np.float64)
-    if x.shape != (68, 3) or not np.isfinite(x).all():
+    x = landmark_array(neutral, "the neutral face")
+    if x.shape != (NUM_LANDMARKS, 3) or not np.isfinite(x).all():
         raise ValueError(f"the neutral face must be 68 x 3 finite landmark coordinates (mm), got shape {x.shape}")
+    check_finite_landmarks(x, "the neutral face's landmarks")
     return x
 
 
@@ -89,7 +98,7 @@ def keyframes(keys, n=4, neutral=None, settings=Keyframes(), denoiser=None, prog
     settings, shape = task_settings(settings, overrides, n)
     neutral = None if neutral is None else check_neutral(neutral)
     given, mask = check_keys(keys, shape[1], neutral)
-    denoiser = denoiser or load_denoiser(f"denoiser_{settings.dataset}")
+    denoiser = denoiser or load_denoiser(checkpoint_name("denoiser", settings.dataset))
     diffusion = denoiser.diffusion_with(settings.steps, settings.variance, settings.ddim_eta)
     x0 = denoiser.to_model(np.broadcast_to(given, shape))
     known = torch.as_tensor(np.broadcast_to(mask, shape[:3]).copy()).to(denoiser.device)

@@ -5,14 +5,15 @@ from __future__ import annotations
 import numpy as np
 
 from .. import data
+from ..checkpoints import checkpoint_name
 from ..baselines import LABEL_BASELINES, generate, load_baseline
-from ..config import ADAGRAD_LR, LR_REFERENCE_STEPS, LabelControl
+from ..config import NUM_DIFFUSION_STEPS, ADAGRAD_LR, LR_REFERENCE_STEPS, LabelControl
 from ..guidance import ClassifierFree, ClassifierScore, MeanShiftGuidance, OptimisationGuidance
 from .loading import guided_chain, load_denoiser, load_guide, task_settings
 from .unconditional import unconditional
 
 
-def step_scaled_lr(rate, reference_steps, steps=None, num_steps=2000, power=0.5):
+def step_scaled_lr(rate, reference_steps, steps=None, num_steps=NUM_DIFFUSION_STEPS, power=0.5):
     """An Adagrad rate chosen for a chain of ``reference_steps`` reverse steps, for a chain of ``steps``
     (None: T = ``num_steps``): scaled by (reference_steps / steps) ** power, so that the guidance moves a
     sample about as far over the whole chain whatever its length (our choice).
@@ -24,7 +25,7 @@ def step_scaled_lr(rate, reference_steps, steps=None, num_steps=2000, power=0.5)
     return rate * float((reference_steps / (steps or num_steps)) ** power)
 
 
-def adagrad_lr(dataset, steps=None, num_steps=2000):
+def adagrad_lr(dataset, steps=None, num_steps=NUM_DIFFUSION_STEPS):
     """The default Adagrad rate of label control (Alg. 1) for a chain of ``steps`` reverse steps
     (None: T): ADAGRAD_LR[dataset], chosen at LR_REFERENCE_STEPS, through :func:`step_scaled_lr`."""
     if dataset not in ADAGRAD_LR:
@@ -61,7 +62,7 @@ def check_labels(label, n):
 def load_conditional_denoiser(dataset):
     """denoiser_<dataset>_cfg, the label-conditional denoiser of classifier-free guidance (an error naming the
     command that trains it when it is missing)."""
-    name = f"denoiser_{dataset}_cfg"
+    name = checkpoint_name("denoiser", dataset, "cfg")
     try:
         return load_denoiser(name)
     except FileNotFoundError:

@@ -8,8 +8,8 @@ import numpy as np
 import torch
 
 from .. import data
-from ..checkpoints import load_checkpoint
-from ..config import TEXT_DATASET, with_overrides
+from ..checkpoints import checkpoint_name, load_checkpoint
+from ..config import NUM_LANDMARKS, TEXT_DATASET, with_overrides
 from ..data import LandmarkNormalizer
 from ..diffusion import GaussianDiffusion, named_betas
 from ..face.sequences import check_num_frames
@@ -71,9 +71,13 @@ def load_denoiser(name="denoiser_coma", variance="beta"):
     return TrainedDenoiser(model, LandmarkNormalizer.from_dict(meta["normalizer"]), diffusion, {**meta, "name": name})
 
 
+MAX_SEQUENCES = 100_000  # one call's sequences: 100000 x 40 frames are 13 GB per copy of x_t, already more than one
+# machine holds; a larger n is a mistake, refused before any memory is asked for
+
+
 def check_n(n, name="n"):
-    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
-        raise ValueError(f"{name} must be a positive integer, got {n!r}")
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not 1 <= n <= MAX_SEQUENCES:
+        raise ValueError(f"{name} must be a positive integer (at most {MAX_SEQUENCES}), got {n!r}")
 
 
 @dataclass
@@ -102,7 +106,7 @@ def load_guide(dataset="coma", classifier_type="I", name=None):
     """Load the shipped guidance classifier guide_<dataset>_<type> (sha256 and classes checked)."""
     data.check_dataset_name(dataset)
     data.check_classifier_type(classifier_type)
-    name = name or f"guide_{dataset}_{classifier_type}"
+    name = name or checkpoint_name("guide", dataset, classifier_type)
     model, meta = load_checkpoint(name, "guide", lambda c: NoisyClassifier(NoisyClassifierConfig(**c)))
     names = data.check_class_names(meta["class_names"], dataset, classifier_type, name)
     if meta["training"]["dataset"] != dataset:
@@ -113,7 +117,7 @@ def load_guide(dataset="coma", classifier_type="I", name=None):
 def load_text_head(dataset=TEXT_DATASET, name=None):
     """Load the shipped text head guide_<dataset>_text (sha256, labels and text encoder checked)."""
     data.check_dataset_name(dataset)
-    name = name or f"guide_{dataset}_text"
+    name = name or checkpoint_name("guide", dataset, "text")
     model, meta = load_checkpoint(name, "text_head", lambda c: NoisyTextHead(TextHeadConfig(**c)))
     names = data.check_class_names(meta["class_names"], dataset, "I", name)
     if meta["training"]["dataset"] != dataset:
@@ -128,7 +132,7 @@ def load_au_regressor(dataset="coma", name=None):
     """Load the shipped AU regressor au_regressor_<dataset> (R(x_t, t) of AU-curve control; sha256 and its
     AUs checked), as a guidance network whose "classes" are the world's AU names."""
     data.check_dataset_name(dataset)
-    name = name or f"au_regressor_{dataset}"
+    name = name or checkpoint_name("au_regressor", dataset)
     model, meta = load_checkpoint(name, "au_regressor", lambda c: AURegressor(AURegressorConfig(**c)))
     if model.config.num_aus != len(AU_NAMES):
         raise ValueError(f"checkpoint {name} regresses {model.config.num_aus} AUs; the world has {len(AU_NAMES)}")
@@ -150,7 +154,7 @@ def check_same_space(denoiser, guide):
 def guided_chain(guide, denoiser, settings):
     """The denoiser of the guide's dataset (or the given one, checked to share the guide's space) and its
     chain for the task's settings (steps, variance, sampler)."""
-    denoiser = denoiser or load_denoiser(f"denoiser_{guide.dataset}")
+    denoiser = denoiser or load_denoiser(checkpoint_name("denoiser", guide.dataset))
     check_same_space(denoiser, guide)
     guide.model.to(denoiser.device)
     return denoiser, denoiser.diffusion_with(settings.steps, settings.variance, settings.ddim_eta)
@@ -160,4 +164,4 @@ def task_settings(settings, overrides, n):
     """The settings of a call (its defaults with the overrides given) and its checked shape (n, F, 68, 3)."""
     settings = with_overrides(settings, overrides)
     check_n(n)
-    return settings, (n, check_num_frames(settings.num_frames), 68, 3)
+    return settings, (n, check_num_frames(settings.num_frames), NUM_LANDMARKS, 3)

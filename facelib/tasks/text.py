@@ -6,7 +6,8 @@ import numpy as np
 import torch
 
 from .. import data
-from ..config import (CONTRASTIVE_GUIDANCE_WEIGHT, CONTRASTIVE_LR, TEXT_GUIDANCE_WEIGHT, TEXT_LR,
+from ..config import (NUM_DIFFUSION_STEPS, CONTRASTIVE_GUIDANCE_WEIGHT, CONTRASTIVE_LR, TEXT_GUIDANCE_WEIGHT,
+                      TEXT_LR,
                       TEXT_LR_REFERENCE_STEPS, TEXT_SCORES, TextControl)
 from ..guidance import (BestOfK, ContrastiveScore, CosineScore, DenoisedCosineScore, OptimisationGuidance,
                         nearest_wording)
@@ -15,7 +16,7 @@ from .label import step_scaled_lr
 from .loading import check_n, guided_chain, load_text_head, task_settings
 
 
-def text_lr(steps=None, num_steps=2000, score="cosine"):
+def text_lr(steps=None, num_steps=NUM_DIFFUSION_STEPS, score="cosine"):
     """The default Adagrad rate of text control (Alg. 2) for a chain of ``steps`` reverse steps
     (None: T): TEXT_LR (CONTRASTIVE_LR for the contrastive score), chosen at TEXT_LR_REFERENCE_STEPS,
     through :func:`step_scaled_lr` with power 1."""

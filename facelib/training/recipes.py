@@ -16,6 +16,7 @@ import torch
 from torch import nn
 
 from .. import config, data, deformation, srvf
+from ..checkpoints import checkpoint_name
 from ..diffusion import GaussianDiffusion, named_betas
 from ..inpainting import FILL_SETTINGS, fill_masks
 from ..models import actor, lstm_filler, motion3dgan, motionclip
@@ -100,7 +101,8 @@ class DenoiserRecipe(Recipe):
         self.mask_all = torch.arange(x.shape[1])[None, :] < torch.as_tensor(train.lengths)[:, None]
         self.x_all = x * self.mask_all[:, :, None, None]
         self.own = torch.as_tensor(train.sequence_neutrals()) / self.normalizer.scale
-        pool = training_anatomies(settings.anatomy_pool) if settings.anatomy_swap > 0 else np.zeros((1, 68, 3))
+        pool = (training_anatomies(settings.anatomy_pool) if settings.anatomy_swap > 0
+                else np.zeros((1, config.NUM_LANDMARKS, 3)))
         self.pool = (torch.as_tensor(pool) / self.normalizer.scale).float()
         self.size = len(self.x_all)
         self.diffusion = GaussianDiffusion(named_betas(settings.schedule, settings.num_diffusion_steps))
@@ -133,8 +135,8 @@ class DenoiserRecipe(Recipe):
                 "data_dir": str(config.SYNTHETIC_DIR.name), **labels}
 
     def checkpoint_name(self):
-        return f"denoiser_{self.settings.dataset}" + ("_var" if self.variable else "") + (
-            "_cfg" if self.settings.conditional else "")
+        variant = "_".join(v for v, on in (("var", self.variable), ("cfg", self.settings.conditional)) if on)
+        return checkpoint_name("denoiser", self.settings.dataset, variant or None)
 
 
 # --------------------------------------------------------------------------- networks that read noisy x_t
@@ -189,7 +191,7 @@ class GuideRecipe(_NoisyRecipe):
         return super().metadata(model) | {"class_names": self.class_names}
 
     def checkpoint_name(self):
-        return f"guide_{self.settings.dataset}_{self.settings.classifier_type}"
+        return checkpoint_name("guide", self.settings.dataset, self.settings.classifier_type)
 
 
 class AURegressorRecipe(_NoisyRecipe):
@@ -213,7 +215,7 @@ class AURegressorRecipe(_NoisyRecipe):
         return loss, {"loss": loss.item()}
 
     def checkpoint_name(self):
-        return f"au_regressor_{self.settings.dataset}"
+        return checkpoint_name("au_regressor", self.settings.dataset)
 
 
 def text_head_loss(output, table, labels, kinds, choice, contrastive_weight=1.0, temperature=0.05):
@@ -267,7 +269,7 @@ class TextHeadRecipe(_NoisyRecipe):
         return super().metadata(model) | {"text_encoder": MODEL_NAME, "class_names": list(self.train.label_names)}
 
     def checkpoint_name(self):
-        return f"guide_{self.settings.dataset}_text"
+        return checkpoint_name("guide", self.settings.dataset, "text")
 
 
 # ------------------------------------------------------------------------------------ the evaluation's IC
@@ -288,7 +290,8 @@ class EvaluatorRecipe(Recipe):
 
     def build(self, generator):
         s = self.settings
-        model = LSTMClassifier(len(self.class_names), hidden=s.hidden, num_landmarks=68, inputs=s.inputs)
+        model = LSTMClassifier(len(self.class_names), hidden=s.hidden, num_landmarks=config.NUM_LANDMARKS,
+                               inputs=s.inputs)
         model.fit_normalization(self.x)
         return model
 
@@ -305,7 +308,7 @@ class EvaluatorRecipe(Recipe):
         return super().metadata(model) | {"class_names": self.class_names}
 
     def checkpoint_name(self):
-        return f"ic_{self.settings.dataset}_{self.settings.classifier_type}"
+        return checkpoint_name("ic", self.settings.dataset, self.settings.classifier_type)
 
 
 # -------------------------------------------------------------------------------------------- baselines
@@ -516,8 +519,8 @@ class DeformationRecipe(Recipe):
                 "held_out_expressions": list(deformation.HELD_OUT_EXPRESSIONS)} | super().metadata(model)
 
     def checkpoint_name(self):
-        seed = f"_seed{self.settings.seed}" if self.settings.seed else ""  # Table 5 over seeds (training.SHIPPED)
-        return f"deform_{self.settings.method}_{self.settings.split}{seed}"
+        # Table 5 over seeds (training.SHIPPED): seed 0 unnamed
+        return checkpoint_name("deform", self.settings.method, self.settings.split, self.settings.seed)
 
 
 RECIPES = {"denoiser": DenoiserRecipe, "guide": GuideRecipe, "text_head": TextHeadRecipe,

@@ -7,6 +7,7 @@ that its recorded settings are these, so ``python -m facelib train all`` rebuild
 from __future__ import annotations
 
 from .. import config
+from ..checkpoints import checkpoint_name
 
 _DEFORMER_METHODS = ("ours", "no_attention", "s2d", "coma", "linear")
 SHIPPED = {
@@ -18,7 +19,7 @@ SHIPPED = {
     "guide_coma_S": ("guide", {"classifier_type": "S"}),
     "guide_bu_I": ("guide", {"dataset": "bu"}),
     "guide_coma+bu_text": ("text_head", {}),
-    **{f"ic_{d}_{c}": ("evaluator", {"dataset": d, "classifier_type": c}) for d in ("coma", "bu", "coma+bu")
+    **{checkpoint_name("ic", d, c): ("evaluator", {"dataset": d, "classifier_type": c}) for d in ("coma", "bu", "coma+bu")
        for c in ("I", "S")},
     "actor_coma": ("actor", {}),
     "actor_bu": ("actor", {"dataset": "bu"}),
@@ -26,10 +27,10 @@ SHIPPED = {
     "motion3dgan_bu": ("motion3dgan", {"dataset": "bu"}),
     "motionclip_coma+bu": ("motionclip", {}),
     "lstm_filler_coma": ("lstm_filler", {}),
-    **{f"deform_{m}_{s}": ("deformer", {"method": m, "split": s}) for m in _DEFORMER_METHODS
+    **{checkpoint_name("deform", m, s): ("deformer", {"method": m, "split": s}) for m in _DEFORMER_METHODS
        for s in ("identity", "expression")},
     # Issue 25: Table 5 over three training seeds for ours, ours without attention and S2D (seed 0 is above).
-    **{f"deform_{m}_{s}_seed{k}": ("deformer", {"method": m, "split": s, "seed": k})
+    **{checkpoint_name("deform", m, s, k): ("deformer", {"method": m, "split": s, "seed": k})
        for m in ("ours", "no_attention", "s2d") for s in ("identity", "expression") for k in (1, 2)},
     # Issue 27: the label-conditional denoiser of classifier-free guidance (tasks.label_control(guidance="cfg")).
     "denoiser_coma_cfg": ("denoiser", {"conditional": True}),
