@@ -5,7 +5,7 @@ Usage:
     python benchmarks/fine_control.py --experiment floor [--save NAME]
     python benchmarks/fine_control.py --experiment keyframes [--n 32] [--steps 100] [--save NAME]
 
-``au``: ``--n`` random requests of one AU within the data's range (tasks.random_requests), and ``--n`` of an AU
+``au``: ``--n`` random requests of one AU within the data's range (experiments.random_requests), and ``--n`` of an AU
 pair that no training sequence activates together (tasks.never_together), each generated once by AU-curve
 control on the neutral face of a held-out test subject; that subject's rig is fitted back to every result
 (tasks.fitted_curves) and the mean absolute error (intensity units) to the requested curve is taken over the
@@ -14,13 +14,13 @@ faces and seeds) and the error of the curves the AU regressor R reads on the res
 what the guidance climbs).  The row "AU guidance off" runs the same chain on the same faces with the AU
 score's weight zero (tasks.AU_GUIDANCE_OFF; Alg. 1's Adagrad steps still pull towards the denoiser's mean): the
 part of the FID that animating a given face costs, without the AU guidance.  Only AUs the fit recovers within
-FLOOR on real test sequences are requested (tasks.fit_floor, tasks.measurable_aus).  Beside it the FID of the
+FLOOR on real test sequences are requested (experiments.fit_floor, tasks.measurable_aus).  Beside it the FID of the
 results (the type-I IC of coma) and the unconditional samples' FID on the same number of sequences.
 
-``floor``: the rig fit's error per AU on real test sequences with their own faces (tasks.fit_floor), and the AUs
+``floor``: the rig fit's error per AU on real test sequences with their own faces (experiments.fit_floor), and the AUs
 the ``au`` experiment requests (tasks.measurable_aus).
 
-``keyframes``: ``--n`` random keys (tasks.random_keys: the displacement of a mobile landmark at a frame of a
+``keyframes``: ``--n`` random keys (experiments.random_keys: the displacement of a mobile landmark at a frame of a
 real test sequence, from its subject's neutral face), met by each method (replace, reconstruction, both);
 the constraint error (mm), the share of requests within config.KEYFRAME_TOLERANCE whose keyed landmark moves into
 and out of the keyed frame no faster than the 95th percentile of that landmark's frame-to-frame motion in the test
@@ -35,11 +35,11 @@ import time
 
 import numpy as np
 
-from facelib import config, data, evaluation, metrics, results, tasks
+from facelib import config, data, evaluation, experiments, metrics, results, tasks
 
 AU_GUIDANCE_OFF_ROW = "AU guidance off"  # tasks.AU_GUIDANCE_OFF: the same chain and face, the AU score's weight 0
 FLOOR = config.AU_MEASURABLE_FIT_ERROR  # AUs whose rig fit on real sequences errs by more cannot be scored at 0.1
-FLOOR_SEQUENCES = 30  # test sequences the rig fit's error is measured on (tasks.fit_floor's default)
+FLOOR_SEQUENCES = 30  # test sequences the rig fit's error is measured on (experiments.fit_floor's default)
 COLUMNS = {
     "au": ["requests", "method", "n", "MAE (intensity)", "MAE 95 % interval", "MAE change vs AU guidance off",
            "change 95 % interval", "MAE read by R", "R 95 % interval", "share with MAE <= 0.1 (%)", "FID",
@@ -59,11 +59,11 @@ def fid_with_interval(evaluator, x):
 
 
 def au_rows(args, evaluator):
-    floor = tasks.fit_floor("coma", n=FLOOR_SEQUENCES)
+    floor = experiments.fit_floor("coma", n=FLOOR_SEQUENCES)
     measurable = tasks.measurable_aus(floor, max_error=FLOOR)
     pairs = [p for p in tasks.never_together("coma") if set(p) <= set(measurable)]
-    requests = {"one AU": tasks.random_requests(args.n, seed=1, aus=measurable),
-                "an AU pair never active together": tasks.random_requests(args.n, seed=2, pairs=pairs)}
+    requests = {"one AU": experiments.random_requests(args.n, seed=1, aus=measurable),
+                "an AU pair never active together": experiments.random_requests(args.n, seed=2, pairs=pairs)}
     test = data.load_dataset("coma", "test")  # the faces animated: held-out subjects, each its own rig
     subjects = np.unique(test.subjects)[np.arange(args.n) % len(np.unique(test.subjects))]
     neutral = np.stack([test.neutral_landmarks(int(s)) for s in subjects])
@@ -112,8 +112,8 @@ def au_rows(args, evaluator):
 
 def floor_rows(args, evaluator):
     """What the scoring of AU-curve control can resolve: the rig fit's error per AU on real test sequences with
-    their own faces (tasks.fit_floor), and which AUs the requests of the au experiment may therefore use."""
-    floor, ranges = tasks.fit_floor("coma", n=FLOOR_SEQUENCES), tasks.data_ranges("coma")
+    their own faces (experiments.fit_floor), and which AUs the requests of the au experiment may therefore use."""
+    floor, ranges = experiments.fit_floor("coma", n=FLOOR_SEQUENCES), tasks.data_ranges("coma")
     measurable = tasks.measurable_aus(floor, max_error=FLOOR)
     rows = [[a, e, ranges[a][1], "yes" if a in measurable else "no"] for a, e in floor.items()]
     args.n = FLOOR_SEQUENCES
@@ -124,7 +124,7 @@ def floor_rows(args, evaluator):
 
 
 def keyframe_rows(args, evaluator):
-    requests = tasks.random_keys(args.n, seed=4)
+    requests = experiments.random_keys(args.n, seed=4)
     real = data.load_dataset("coma", "test").landmarks
     t0 = time.perf_counter()
     plain = tasks.unconditional(args.n, steps=args.steps, seed=5, progress=False)

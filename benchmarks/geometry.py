@@ -26,7 +26,7 @@ import time
 import numpy as np
 import torch
 
-from facelib import config, data, evaluation, metrics, results, tasks
+from facelib import config, data, evaluation, experiments, metrics, results, tasks
 
 COLUMNS = ["method", "pass", "Acc (%)", "Acc 95 % interval", "FID", "FID 95 % interval", "diversity",
            "diversity 95 % interval", "step from the given frame, median (mm/frame)", "seconds"]
@@ -44,7 +44,7 @@ def main():
     ev = evaluation.load_evaluator("coma", "S")
     denoiser, guide = tasks.load_denoiser("denoiser_coma"), tasks.load_guide("coma", "S")
     test = data.load_dataset("coma", "test")
-    rows_sel, labels, neutral, known = tasks.table4_inputs(test, ev.class_names, args.per_class)
+    rows_sel, labels, neutral, known = experiments.table4_inputs(test, ev.class_names, args.per_class)
     truth, targets = test.landmarks[rows_sel], test.targets("S")[rows_sel]
     print(f"cores: {os.cpu_count()}, torch threads: {torch.get_num_threads()}, n = {len(rows_sel)}, "
           f"steps {args.steps} per pass, {args.passes} passes, zeta = {args.reconstruction_scale:g}")

@@ -18,7 +18,7 @@ import time
 
 import numpy as np
 
-from facelib import config, data, evaluation, results, tasks
+from facelib import config, data, evaluation, experiments, results, tasks
 
 COLUMNS = ["rate", "Acc (%)", "Acc 95 % interval", "FID", "FID 95 % interval", "motion (mm)", "seconds"]
 
@@ -38,7 +38,7 @@ def main():
     ev = evaluation.load_evaluator("coma", "S")
     denoiser, guide = tasks.load_denoiser("denoiser_coma"), tasks.load_guide("coma", "S")
     test = data.load_dataset("coma", "test")
-    rows_sel, labels, neutral, _ = tasks.table4_inputs(test, ev.class_names, args.per_class)
+    rows_sel, labels, neutral, _ = experiments.table4_inputs(test, ev.class_names, args.per_class)
     targets = test.targets("S")[rows_sel]
 
     def row(name, x, seconds):

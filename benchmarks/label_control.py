@@ -20,7 +20,7 @@ import time
 import numpy as np
 import torch
 
-from facelib import baselines, config, data, evaluation, results, tasks
+from facelib import baselines, config, data, evaluation, experiments, results, tasks
 
 SWEEP_LR = {"coma": [0.001, 0.003, 0.01, 0.03, 0.05, 0.1], "bu": [0.01, 0.03, 0.05, 0.1]}  # at 200 steps
 SWEEP_WEIGHTS = [0.0, 0.01, 1.0]
@@ -80,7 +80,7 @@ def table1_experiment(args, name, ev, guide, denoiser):
     test = data.load_dataset(name, "test")
     n = min(args.n or len(test), len(test))
     targets = test.targets("I")[:n]
-    generators = tasks.table1_generators(name, range(n), steps, guide, denoiser, args.mean_shift_scale)
+    generators = experiments.table1_generators(name, range(n), steps, guide, denoiser, args.mean_shift_scale)
     rows = []
     for row, generate in generators.items():
         t0 = time.perf_counter()

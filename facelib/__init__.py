@@ -22,7 +22,9 @@ The map of the package, bottom to top.  A module imports only from the layers be
    ``evaluation``   the independent classifier and its scores
 6. ``tasks``        unconditional, label (Alg. 1), text (Alg. 2), fill (Alg. 3), geometry (Alg. 4);
    ``text_eval``    measurements of text control: what the head reads, compositions, order and label
-7. ``pipeline``     neutral mesh -> animated meshes;  ``training``  one loop, one recipe per model
+7. ``pipeline``     neutral mesh -> animated meshes;  ``training``  one loop, one recipe per model;
+   ``experiments``  the inputs the tables and benchmarks measure the tasks on (Table 1's rows, Table 4's inputs,
+                    random AU requests and keyframes, the rig fit's floor)
 8. ``cli_sample``   the command line's ``sample TASK`` (a subcommand per task, options from config)
 9. ``__main__``     the command line: ``python -m facelib data|train|sample TASK|neutral|animate|chapter|results``
 
@@ -32,7 +34,7 @@ The public API is the modules themselves: ``from facelib import tasks; tasks.lab
 LAYERS = {"config": 0, "face": 1, "metrics": 1, "srvf": 1, "chapters": 1, "paper": 1, "data": 2, "descriptions": 2,
           "diffusion": 2, "viz": 2, "meshio": 2, "tables": 2, "text": 3, "models": 3, "checkpoints": 3, "guidance": 4,
           "inpainting": 4, "rig_fit": 4, "toy": 4, "results": 4, "baselines": 5, "deformation": 5, "evaluation": 5,
-          "tasks": 6, "text_eval": 6, "pipeline": 7, "training": 7, "cli_sample": 8, "__main__": 9}
-__all__ = ["baselines", "chapters", "checkpoints", "cli_sample", "config", "data", "deformation", "descriptions",
+          "tasks": 6, "text_eval": 6, "pipeline": 7, "experiments": 7, "training": 7, "cli_sample": 8, "__main__": 9}
+__all__ = ["baselines", "chapters", "checkpoints", "cli_sample", "config", "data", "deformation", "descriptions", "experiments",
            "diffusion", "evaluation", "face", "guidance", "inpainting", "meshio", "metrics", "models", "paper",
            "pipeline", "results", "rig_fit", "srvf", "tables", "tasks", "text", "text_eval", "toy", "training", "viz"]

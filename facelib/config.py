@@ -553,11 +553,11 @@ class TextControl(Sampling):
 AU_CURVE_TOLERANCE = 0.1  # tau of AU-curve control: log N(c | R(x_t, t), tau^2), in AU intensity units (our choice)
 AU_CURVE_LR = 0.03  # the Adagrad rate of AU-curve control at 50 steps (our choice; the fine-control chapter)
 AU_MEASURABLE_FIT_ERROR = 0.05  # our choice: AU-curve control is scored on the AUs that the rig fit recovers
-# within this (mean absolute error, intensity units) on real test sequences (tasks.fit_floor), no others
+# within this (mean absolute error, intensity units) on real test sequences (experiments.fit_floor), no others
 AU_ACTIVE = 0.2  # our choice: a sequence activates an AU when its |intensity| exceeds this at some frame
 # (tasks.au.active_aus, tasks.never_together): a clear activation (a fifth of a typical strong apex), not a trace
 AU_REQUEST_PEAK = (0.3, 1.0)  # our choice: a random request's peak lies in [low, min(high, the data's highest)]
-# (tasks.random_requests): strong enough for the rig fit to see, never beyond a typical strong apex (1)
+# (experiments.random_requests): strong enough for the rig fit to see, never beyond a typical strong apex (1)
 AU_REQUEST_PEAK_FRAMES = (10, 25)  # our choice: the frames (inclusive) where a random request peaks, so the
 # curve rises over at least 10 frames and falls over at least 14 of the 40
 

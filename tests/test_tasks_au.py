@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 import torch
 
-from facelib import guidance, tasks
+from facelib import experiments, guidance, tasks
 from facelib.face.aus import AU_NAMES
 from facelib.models.au_regressor import AURegressor, AURegressorConfig
 
@@ -95,7 +95,7 @@ def test_the_regressor_recipe_trains_and_its_checkpoint_loads_as_a_guide(tmp_pat
 
 
 def test_random_requests_stay_in_the_data_and_fitted_requests_score_zero():
-    requests = tasks.random_requests(6, seed=1)
+    requests = experiments.random_requests(6, seed=1)
     ranges = tasks.data_ranges("coma")
     for request in requests:  # each parses against the data's ranges
         curves, mask = tasks.requested_curves(request, 40, ranges)
@@ -121,14 +121,14 @@ def test_active_aus_reads_signed_aus_by_their_size_and_never_together_uses_it():
 
 
 def test_random_requests_peak_where_their_settings_say_and_name_their_aus():
-    requests = tasks.random_requests(20, seed=0, aus=["AU2", "AU26"], low=0.4, high=0.6, peak_frames=(12, 14))
+    requests = experiments.random_requests(20, seed=0, aus=["AU2", "AU26"], low=0.4, high=0.6, peak_frames=(12, 14))
     for (spec,) in requests:
         keys = [k.split("@") for k in spec.split(":")[1].split(",")]
         assert 0.4 <= float(keys[1][0]) <= 0.6 and 12 <= int(keys[1][1]) <= 14 and keys[2][1] == "39"
     assert tasks.au.requested_aus(requests) == ["AU2", "AU26"]
     assert tasks.au.requested_aus([["AU12:0", "AU1:0.5"]]) == ["AU1", "AU12L", "AU12R"]
     with pytest.raises(ValueError, match="peak_frames must be"):
-        tasks.random_requests(1, peak_frames=(0, 39))
+        experiments.random_requests(1, peak_frames=(0, 39))
 
 
 def test_au_guidance_off_is_the_same_chain_and_face_with_the_au_score_weighted_zero(denoiser):

@@ -4,7 +4,7 @@ import json
 import numpy as np
 import pytest
 
-from facelib import tasks
+from facelib import experiments, tasks
 
 NEUTRAL = np.random.default_rng(0).normal(0, 30, (68, 3))
 
@@ -64,7 +64,7 @@ def test_keyframes_meet_their_keys(method, denoiser, coma_test):
 
 
 def test_random_keys_are_real_displacements_and_key_speeds_read_the_keyed_frame():
-    (keys, neutral), = tasks.random_keys(1, seed=3)
+    (keys, neutral), = experiments.random_keys(1, seed=3)
     tasks.check_keys(keys, 40, neutral)  # valid against their own face
     x = np.zeros((1, 40, 68, 3))
     x[0, keys[0]["frame"]:, keys[0]["landmark"]] += 4.0  # the keyed landmark jumps at the keyed frame

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from facelib import config, evaluation, tasks
+from facelib import config, evaluation, experiments, tasks
 
 
 def test_label_control_errors():
@@ -51,7 +51,7 @@ def test_label_control_is_deterministic_and_beats_unguided_sampling():
 
 
 def test_table1_has_the_papers_rows_for_the_requested_test_sequences(coma_test, denoiser):
-    rows = tasks.table1_generators("coma", [3, 5], 2, tasks.load_guide("coma"), denoiser, 10.0)
+    rows = experiments.table1_generators("coma", [3, 5], 2, tasks.load_guide("coma"), denoiser, 10.0)
     assert list(rows) == ["Ground truth (test split)", "Motion3DGAN-style (MoGAN)", "ACTOR-style CVAE",
                           "DDPM, unguided", "DDPM + mean shift (scale 10)", "DDPM + Alg. 1 (ours)"]
     assert np.array_equal(rows["Ground truth (test split)"](), coma_test.landmarks[[3, 5]])

@@ -16,28 +16,27 @@ task's frozen dataclass in facelib/config.py (the book's recommended values; ``.
 printed algorithm, ``.fast()`` a few steps) and ``overrides`` change single fields, e.g.
 ``tasks.label_control("high_smile", 16, steps=100)``.
 """
-from .au import (AU_GUIDANCE_OFF, active_aus, au_control, curve_errors, data_ranges, fit_floor, fitted_curves,
-                 measurable_aus, never_together, parse_curve, random_requests, regressor_curves, requested_aus,
+from .au import (AU_GUIDANCE_OFF, active_aus, au_control, curve_errors, data_ranges, fitted_curves,
+                 measurable_aus, never_together, parse_curve, regressor_curves, requested_aus,
                  requested_curves)
 from .decoder import decoder_then_diffusion
 from .edit import check_sequences, edit, invert, keep_on_path
 from .fill import fill
-from .keyframes import (check_keys, key_errors, key_speeds, keyframe_report, keyframes, random_keys, read_constraints,
+from .keyframes import (check_keys, key_errors, key_speeds, keyframe_report, keyframes, read_constraints,
                         real_speed_p95)
-from .geometry import geometry_adaptive, geometry_passes, order_sensitive_label, table4_inputs
-from .label import (adagrad_lr, check_labels, label_control, label_sampler, load_conditional_denoiser, step_scaled_lr,
-                    table1_generators)
+from .geometry import geometry_adaptive, geometry_passes, order_sensitive_label
+from .label import (adagrad_lr, check_labels, label_control, label_sampler, load_conditional_denoiser, step_scaled_lr)
 from .loading import (TrainedDenoiser, TrainedGuide, check_same_space, load_au_regressor, load_denoiser, load_guide,
                       load_text_head)
 from .text import text_control, text_guidance_weight, text_lr, text_score
 from .unconditional import unconditional
 
-__all__ = ["check_keys", "key_errors", "key_speeds", "keyframe_report", "keyframes", "random_keys", "read_constraints",
-           "real_speed_p95", "AU_GUIDANCE_OFF", "au_control", "curve_errors", "data_ranges", "fit_floor",
-           "fitted_curves", "measurable_aus", "never_together", "parse_curve", "random_requests", "requested_curves",
+__all__ = ["check_keys", "key_errors", "key_speeds", "keyframe_report", "keyframes", "read_constraints",
+           "real_speed_p95", "AU_GUIDANCE_OFF", "au_control", "curve_errors", "data_ranges",
+           "fitted_curves", "measurable_aus", "never_together", "parse_curve", "requested_curves",
            "regressor_curves", "load_au_regressor",
            "decoder_then_diffusion", "check_sequences", "edit", "invert", "keep_on_path", "check_labels",
-           "label_sampler", "load_conditional_denoiser", "table1_generators", "fill", "geometry_adaptive",
-           "geometry_passes", "order_sensitive_label", "table4_inputs", "adagrad_lr", "label_control",
+           "label_sampler", "load_conditional_denoiser", "fill", "geometry_adaptive",
+           "geometry_passes", "order_sensitive_label", "adagrad_lr", "label_control",
            "step_scaled_lr", "TrainedDenoiser", "TrainedGuide", "check_same_space", "load_denoiser", "load_guide",
            "load_text_head", "text_control", "text_guidance_weight", "text_lr", "text_score", "unconditional"]

@@ -178,22 +178,9 @@ def regressor_curves(sequences, regressor=None, dataset="coma"):
     return regressor.model(x, torch.zeros(len(x))).numpy()
 
 
-def fit_floor(dataset="coma", n=30, active=0.1):
-    """{AU: mean absolute error of the rig fit on real test sequences of ``dataset`` with their own faces, over
-    the entries where the AU is active (above ``active``)}: what the measurement of AU-curve control cannot
-    resolve (capture noise, AUs the landmarks barely see); AUs active in fewer than 20 entries are left out."""
-    test = data.load_dataset(dataset, "test")
-    idx = np.linspace(0, len(test) - 1, n).round().astype(int)
-    w = test.au_weights[idx]
-    fit = fitted_curves(test.landmarks[idx], [test.face(int(test.subjects[i])) for i in idx])
-    on = np.abs(w) > active
-    return {a: float(np.abs(fit - w)[..., k][on[..., k]].mean()) for k, a in enumerate(AU_NAMES)
-            if on[..., k].sum() >= 20}
-
-
 def measurable_aus(floor, dataset="coma", max_error=AU_MEASURABLE_FIT_ERROR):
     """The AUs that requests may use when the result is scored by the rig fit: those whose fit error on real
-    sequences (``floor``, :func:`fit_floor`) is at most ``max_error``, that the data push to at least 0.5, and not
+    sequences (``floor``, :func:`facelib.experiments.fit_floor`) is at most ``max_error``, that the data push to at least 0.5, and not
     the blink AU45 (a blink is over in a few frames)."""
     ranges = data_ranges(dataset)
     return [a for a, e in floor.items() if e <= max_error and ranges[a][1] >= 0.5 and a != "AU45"]
@@ -227,31 +214,6 @@ def never_together(dataset="coma", active=AU_ACTIVE):
     used = np.flatnonzero(on.any(0))
     return [(AU_NAMES[a], AU_NAMES[b]) for i, a in enumerate(used) for b in used[i + 1:]
             if not (on[:, a] & on[:, b]).any()]
-
-
-def random_requests(n, seed=0, dataset="coma", aus=None, pairs=None, low=AU_REQUEST_PEAK[0],
-                    high=AU_REQUEST_PEAK[1], peak_frames=AU_REQUEST_PEAK_FRAMES, num_frames=NUM_FRAMES):
-    """n random requests within the data's range: one AU (of ``aus``; default, every AU the data push to at
-    least 0.5) or one pair of ``pairs``, each a curve from 0 at frame 0 up to a peak in [low, min(high, the
-    data's highest)] at a frame in ``peak_frames`` (first, last), then to a value between 0 and the peak at the
-    last frame."""
-    rng = np.random.default_rng(seed)
-    ranges = data_ranges(dataset)
-    aus = aus or [a for a in AU_NAMES if ranges[a][1] >= 0.5 and a != "AU45"]
-    first, last = peak_frames
-    if not 0 < first <= last < num_frames - 1:
-        raise ValueError(f"peak_frames must be (first, last) with 0 < first <= last < {num_frames - 1}, "
-                         f"got {peak_frames!r}")
-    requests = []
-    for _ in range(n):
-        chosen = pairs[rng.integers(len(pairs))] if pairs else (aus[rng.integers(len(aus))],)
-        request = []
-        for a in chosen:
-            peak = rng.uniform(low, min(high, ranges[a][1]))
-            request.append(f"{a}:0@0,{peak:.2f}@{rng.integers(first, last + 1)},{rng.uniform(0, peak):.2f}"
-                           f"@{num_frames - 1}")
-        requests.append(request)
-    return requests
 
 
 def requested_aus(requests):

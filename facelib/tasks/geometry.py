@@ -104,16 +104,3 @@ def geometry_adaptive(neutral_landmarks, label, n=1, settings=GeometryAdaptive()
                       progress=True, **overrides):
     """Geometry-adaptive generation (Alg. 4): the last pass of :func:`geometry_passes`, (n, F, 68, 3) float32 in mm."""
     return geometry_passes(neutral_landmarks, label, n, settings, denoiser, guide, progress, **overrides)[-1]
-
-
-def table4_inputs(test, class_names, per_class=None):
-    """The inputs of Table 4 (§5.4) from a test split: its rows (``per_class`` per type-S class of
-    ``class_names``; None: all), their type-S labels, neutral landmarks (n, 68, 3) and known-frame masks
-    (n, F) (frame 1 for N2E, frame F for E2N)."""
-    targets = test.targets("S")
-    rows = np.concatenate([np.flatnonzero(targets == c)[:per_class] for c in range(len(class_names))])
-    labels = [class_names[c] for c in targets[rows]]
-    known = np.zeros((len(rows), test.landmarks.shape[1]), bool)
-    known[np.arange(len(rows)), [0 if lab.endswith("N2E") else -1 for lab in labels]] = True
-    return rows, labels, test.sequence_neutrals()[rows], known
-

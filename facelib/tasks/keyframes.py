@@ -123,27 +123,6 @@ def key_errors(sequences, keys, neutral=None):
     return np.linalg.norm(x[:, frames, landmarks] - given[frames, landmarks], axis=-1)
 
 
-MOBILE_LANDMARKS = (8, 19, 24, 48, 54, 57)  # chin, brows, mouth corners, lower lip: what expressions move most
-
-
-def random_keys(n, seed=0, dataset="coma", landmarks=MOBILE_LANDMARKS, frames=(10, 35)):
-    """n random requests [(keys, neutral (68, 3))] that real motion can meet: for a random test sequence of
-    ``dataset`` (an N2E one), its subject's neutral face and one key, the displacement of one of ``landmarks``
-    at a frame in ``frames`` (first, last; our choice: after the onset, before the last frames) of that
-    sequence."""
-    test = data.load_dataset(dataset, "test")
-    if not 0 < frames[0] <= frames[1] < test.landmarks.shape[1]:
-        raise ValueError(f"frames must be (first, last) with 0 < first <= last < {test.landmarks.shape[1]}, "
-                         f"got {frames!r}")
-    n2e = np.flatnonzero(test.kinds == 0)
-    rng = np.random.default_rng(seed)
-    requests = []
-    for i in rng.choice(n2e, n, replace=len(n2e) < n):
-        neutral = test.neutral_landmarks(int(test.subjects[i]))
-        frame, landmark = int(rng.integers(frames[0], frames[1] + 1)), int(rng.choice(landmarks))
-        shift = test.landmarks[i, frame, landmark].astype(np.float64) - neutral[landmark]
-        requests.append(([{"frame": frame, "landmark": landmark, "displacement": shift.round(2).tolist()}], neutral))
-    return requests
 
 
 def key_speeds(sequences, keys):
