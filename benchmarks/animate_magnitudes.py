@@ -47,6 +47,7 @@ def main():
     parser.add_argument("--steps", type=int, default=None, help="reverse steps (default: the book's, config)")
     results.add_save_options(parser)
     args = parser.parse_args()
+    results.check_save_args(args)  # before any compute
     t_start = time.perf_counter()
     index = get_template().landmark_index
     coma = data.load_dataset("coma", "all")

@@ -54,6 +54,7 @@ def main():
     parser.add_argument("--only", type=int, nargs="+", default=None, help="candidates to run, by index")
     results.add_save_options(parser)
     args = parser.parse_args()
+    results.check_save_args(args)  # before any compute
     if not 0 < args.budget <= 1:
         parser.error(f"--budget must be in (0, 1], got {args.budget}")
     chosen = range(len(CANDIDATES)) if args.only is None else args.only

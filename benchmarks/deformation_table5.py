@@ -37,6 +37,7 @@ def main():
     parser.add_argument("--frames", type=int, default=4, help="frames per test sequence (default 4)")
     results.add_save_options(parser)
     args = parser.parse_args()
+    results.check_save_args(args)  # before any compute
     t_start = time.perf_counter()
     rows, used, tested = [], [], 0
     for split in deformation.SPLITS:

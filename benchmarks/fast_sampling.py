@@ -220,6 +220,7 @@ def main():
                         help="edit: the mean shift's scales (default: --mean-shift-scale)")
     results.add_save_options(parser)
     args = parser.parse_args()
+    results.check_save_args(args)  # before any compute
     args.n = args.n or (32 if args.experiment == "edit" else 48)
     if args.n < 24:  # two per class: multimodality and the intervals need them
         parser.error(f"--n must be at least 24 (two sequences of each of the 12 labels), got {args.n}")

@@ -43,6 +43,9 @@ def main():
     parser.add_argument("--only", metavar="TEXT", help="only the candidates whose name contains TEXT")
     results.add_save_options(parser)
     args = parser.parse_args()
+    results.check_save_args(args)  # before any compute
+    if args.only and args.save:
+        parser.error("--only measures some candidates: it cannot --save the whole table")
     t_start = time.perf_counter()
     test = data.load_dataset("coma", "test")
     p95 = float(np.percentile(metrics.frame_speeds(data.load_dataset("coma", "train").landmarks), 95))
@@ -76,7 +79,7 @@ def main():
         path = results.save_result(
             args.save, "The fill default: seams, accuracy and FID of candidate settings (coma test split)", COLUMNS,
             rows, results.Run(allow_dirty=args.allow_dirty,
-                              settings=(config.Fill(),), checkpoints=["denoiser_coma", "ic_coma_I"], seeds=[0], n=args.n,
+                              checkpoints=["denoiser_coma", "ic_coma_I"], seeds=[0], n=args.n,
                               steps=sorted({s["steps"] for s in CANDIDATES.values()}),
                               wall_time_s=time.perf_counter() - t_start),
             notes=f"known frames {args.known}; seams within p95: every known/generated boundary moves at most the "

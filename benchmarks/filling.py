@@ -54,6 +54,7 @@ def main():
     parser.add_argument("--reconstruction-scale", type=float, default=config.RECONSTRUCTION_SCALE)
     results.add_save_options(parser)
     args = parser.parse_args()
+    results.check_save_args(args)  # before any compute
     t_start = time.perf_counter()
     ev = evaluation.load_evaluator("coma", "I")
     denoiser, filler = tasks.load_denoiser("denoiser_coma"), baselines.load_filler("coma")

@@ -39,6 +39,7 @@ from facelib import config, data, evaluation, experiments, metrics, results, tas
 
 AU_GUIDANCE_OFF_ROW = "AU guidance off"  # tasks.AU_GUIDANCE_OFF: the same chain and face, the AU score's weight 0
 FLOOR = config.AU_MEASURABLE_FIT_ERROR  # AUs whose rig fit on real sequences errs by more cannot be scored at 0.1
+MEASURED = {"au": (config.AUControl(),), "floor": (), "keyframes": (config.Keyframes(),)}  # the defaults measured
 FLOOR_SEQUENCES = 30  # test sequences the rig fit's error is measured on (experiments.fit_floor's default)
 COLUMNS = {
     "au": ["requests", "method", "n", "MAE (intensity)", "MAE 95 % interval", "MAE change vs AU guidance off",
@@ -164,6 +165,7 @@ def main():
                         help="keyframes: more reconstruction scales zeta to try with 'both' (default: none)")
     results.add_save_options(parser)
     args = parser.parse_args()
+    results.check_save_args(args)  # before any compute
     default = config.Keyframes() if args.experiment == "keyframes" else config.AUControl()
     args.steps = args.steps or default.steps
     steps = [] if args.experiment == "floor" else [args.steps]  # the floor samples nothing: the rig fit of real data
@@ -176,7 +178,7 @@ def main():
                  "floor": "What the rig fit resolves: its error per AU on real test sequences",
                  "keyframes": "Landmark keyframes: constraint error, smoothness, realism"}[args.experiment]
         results.save_result(args.save, title, COLUMNS[args.experiment], rows,
-                            results.Run(allow_dirty=args.allow_dirty,
+                            results.Run(allow_dirty=args.allow_dirty, settings=MEASURED[args.experiment],
                                         checkpoints=checkpoints, seeds=SEEDS[args.experiment], n=args.n, steps=steps,
                                         wall_time_s=time.perf_counter() - t_start),
                             notes="; ".join(([] if evaluator is None else [

@@ -40,6 +40,7 @@ def main():
     parser.add_argument("--reconstruction-scale", type=float, default=config.RECONSTRUCTION_SCALE)
     results.add_save_options(parser)
     args = parser.parse_args()
+    results.check_save_args(args)  # before any compute
     t_start = time.perf_counter()
     ev = evaluation.load_evaluator("coma", "S")
     denoiser, guide = tasks.load_denoiser("denoiser_coma"), tasks.load_guide("coma", "S")
@@ -75,7 +76,7 @@ def main():
         path = results.save_result(
             args.save, title="Table 4, geometry-adaptive generation on the coma test split (IC type S), pass by pass",
             columns=COLUMNS, rows=table,
-            run=results.Run(allow_dirty=args.allow_dirty,
+            run=results.Run(allow_dirty=args.allow_dirty, settings=(config.GeometryAdaptive(),),
                             checkpoints=["denoiser_coma", "guide_coma_S", "ic_coma_S"], seeds=[0], n=len(rows_sel),
                             steps=[args.steps], wall_time_s=time.perf_counter() - t_start),
             notes=f"{args.per_class or 'all'} test sequences per type-S class, each from its own neutral frame; "

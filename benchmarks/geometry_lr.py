@@ -34,6 +34,7 @@ def main():
     parser.add_argument("--lr", type=float, nargs="+", default=[0.01, 0.03, 0.1], help="rates to compare")
     results.add_save_options(parser)
     args = parser.parse_args()
+    results.check_save_args(args)  # before any compute
     t_start = time.perf_counter()
     ev = evaluation.load_evaluator("coma", "S")
     denoiser, guide = tasks.load_denoiser("denoiser_coma"), tasks.load_guide("coma", "S")

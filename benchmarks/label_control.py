@@ -104,6 +104,7 @@ def main():
     parser.add_argument("--mean-shift-scale", type=float, default=10.0, help="table1: the mean-shift row's scale")
     results.add_save_options(parser)
     args = parser.parse_args()
+    results.check_save_args(args)  # before any compute
     if args.steps is None:
         args.steps = [2000, 500, 200, 100] if args.experiment == "steps" else [200]
     elif args.experiment != "steps" and len(args.steps) != 1:

@@ -112,6 +112,7 @@ def main():
     parser.add_argument("--seed", type=int, default=0)
     results.add_save_options(parser)
     args = parser.parse_args()
+    results.check_save_args(args)  # before any compute
     if args.n < 2:
         parser.error(f"--n must be at least 2 (intervals are bootstrapped over the sequences), got {args.n}")
     if args.steps is None:

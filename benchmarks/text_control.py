@@ -74,6 +74,7 @@ def main():
                         help="leave out the MotionCLIP-style and decoder + DDPM rows")
     results.add_save_options(parser)
     args = parser.parse_args()
+    results.check_save_args(args)  # before any compute
     t_start = time.perf_counter()
     kind = "S" if args.enriched else "I"
     ev = evaluation.load_evaluator(DATASET, kind)

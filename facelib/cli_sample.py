@@ -174,7 +174,6 @@ class Task:
     settings: object
     run: Callable  # (args, settings, denoiser) -> (landmarks (n, F, 68, 3) in mm, extra arrays to store)
     inputs: tuple = ()  # ((flags...), argparse keywords) of the task's own inputs
-    guide: str | None = None  # the guide's checkpoint name, formatted with the dataset
     in_paper: bool = True  # --paper: the paper's printed algorithm
     takes_n: bool = True
     usage: str | None = None
@@ -182,10 +181,10 @@ class Task:
 
 TASKS = {
     "unconditional": Task("the unconditional DDPM (§3.1)", config.Unconditional(), _unconditional),
-    "label": Task("label control (Alg. 1)", config.LabelControl(), _label, (LABEL,), "guide_{}_I"),
-    "text": Task("text control (Alg. 2)", config.TextControl(), _text, (TEXT,), "guide_{}_text"),
+    "label": Task("label control (Alg. 1)", config.LabelControl(), _label, (LABEL,)),
+    "text": Task("text control (Alg. 2)", config.TextControl(), _text, (TEXT,)),
     "decoder": Task("a text decoder's sequence refined by the DDPM (not in the paper)", config.DecoderThenDiffusion(),
-                    _decoder, (TEXT,), "motionclip_{}"),
+                    _decoder, (TEXT,)),
     "fill": Task("expression filling (Alg. 3)", config.Fill(), _fill, (
         (("--input",), dict(required=True, help=".npz whose 'landmarks' (F, 68, 3) or (n, F, 68, 3) holds the "
                                                 "sequence(s) to complete")),
@@ -193,11 +192,11 @@ TASKS = {
     "geometry": Task("geometry-adaptive generation of a given face (Alg. 4)", config.GeometryAdaptive(), _geometry, (
         (("--label",), dict(required=True, help="an expression label, e.g. mouth_open, or 'mouth_open E2N'")),
         (("--neutral",), dict(required=True, help=".npz with the neutral landmarks (68, 3) in mm (key 'neutral' or "
-                                                  "'landmarks')"))), "guide_{}_S"),
+                                                  "'landmarks')")))),
     "edit": Task("change the expression of a given sequence: DDIM inversion, then label control (not in the paper)",
                  config.Edit(), _edit, (LABEL, (("--input",), dict(
                      required=True, help=".npz whose 'landmarks' (F, 68, 3) or (n, F, 68, 3) in mm holds the "
-                                         "sequence(s) to edit"))), "guide_{}_I", in_paper=False, takes_n=False,
+                                         "sequence(s) to edit"))), in_paper=False, takes_n=False,
                  usage=EDIT),
     "au": Task("AU-curve control: action units that follow requested intensity curves (not in the paper)",
                config.AUControl(), _au, (
@@ -208,7 +207,7 @@ TASKS = {
                    (("--neutral",), dict(default=None, help=".npz with the neutral landmarks (68, 3) in mm of the "
                                          "face to animate (key 'neutral' or 'landmarks'), which is then frame 0 "
                                          "(default: the model draws the face too)"))),
-               "au_regressor_{}", in_paper=False),
+               in_paper=False),
     "keyframes": Task("chosen landmarks at chosen frames, a natural sequence around them (not in the paper)",
                       config.Keyframes(), _keyframes, ((("--constraints",), dict(
                           required=True, help="the keyframes, a JSON file (see above)")),), in_paper=False,
@@ -313,6 +312,9 @@ def settings_of(args):
         settings = replace(settings, lr=tasks.adagrad_lr(settings.dataset, settings.steps))
     if args.task == "text" and settings.guidance_weight is None:
         settings = replace(settings, guidance_weight=tasks.text_guidance_weight(settings.score))
+    if args.task == "au" and settings.method == "adagrad" and settings.lr is None:
+        settings = replace(settings, lr=tasks.step_scaled_lr(config.AU_CURVE_LR, tasks.au.AU_CURVE_REFERENCE_STEPS,
+                                                             settings.steps))
     if args.task == "text" and settings.lr is None:
         settings = replace(settings, lr=tasks.text_lr(settings.steps, score=settings.score))
     return settings
@@ -339,12 +341,13 @@ def run(args):
         landmarks, extra = spec.run(args, settings, denoiser)
     if (args.task, "num_frames") in INTERNAL:  # the input's length
         settings = replace(settings, num_frames=landmarks.shape[1])
+    guides = [name for name in used_checkpoints if name != Path(checkpoint).stem]  # what steered the denoiser
     used = {"task": args.task, "paper": args.paper, "n": len(landmarks), "checkpoint": checkpoint,
             "checkpoint_sha256": denoiser.meta["sha256"], "checkpoints": used_checkpoints,
-            "guide": None if cfg or spec.guide is None else spec.guide.format(settings.dataset),
+            "guide": guides[0] if len(guides) == 1 else (guides or None),
             "adagrad_steps": config.ADAGRAD_STEPS, **asdict(settings),
             **({"scale": settings.guidance_scale} if hasattr(settings, "guidance_scale") else {}),
-            **({"method": settings.guidance_method} if hasattr(settings, "guidance_method") else {}),
+            **({"method": None if cfg else settings.guidance_method} if hasattr(settings, "guidance_method") else {}),
             **{k: getattr(args, k) for k in ("label", "text", "input", "known", "neutral", "curve", "constraints")
                if hasattr(args, k)}}
     if not np.isfinite(landmarks).all():  # nothing written: a file of NaN would pass for a result

@@ -8,8 +8,8 @@ the number of cores.
 
 A stored result is *stale* when a checkpoint it names no longer has the sha256 it recorded (the
 model was retrained after the experiment ran), when the datasets it records were built by another world
-(their fingerprint changed), or when a default of the settings it records has changed since (e.g.
-``config.Fill.steps``): :func:`problems` says so, naming the file and what changed, and a test fails on
+(their fingerprint changed), or when a default of the settings it records (the config dataclasses a benchmark
+names as measured) has changed since (e.g. ``config.Fill.steps``): :func:`problems` says so, naming the file and what changed, and a test fails on
 every stale or malformed file.  Files are written to a temporary file and renamed, so an interrupted
 command leaves the previous result intact.  A result is not saved from a tree whose facelib/ or
 benchmarks/ have uncommitted changes (its commit would not name the code that made it), unless the
@@ -82,6 +82,13 @@ def check_clean(name, allow_dirty=False):
                          f"({'; '.join(changed[:5])}{' ...' if len(changed) > 5 else ''}), so the commit it would "
                          "record does not name the code that made it; commit them and re-run, or pass "
                          "--allow-dirty (recorded in the result)")
+
+
+def check_save_args(args):
+    """Right after a benchmark parses its arguments: refuse ``--save`` from uncommitted code before any compute."""
+    if getattr(args, "save", None):
+        result_path(args.save)
+        check_clean(args.save, args.allow_dirty)
 
 
 def add_save_options(parser):
@@ -180,6 +187,9 @@ def merged_rows(name, rows, key_length=1):
     stored = json.loads(path.read_text())
     own = {k: stored[k] for k in ("commit", "date", "command")}
     provenance = stored.get("row_provenance") or [own] * len(stored["rows"])
+    if len(provenance) != len(stored["rows"]):
+        raise ValueError(f"{path}: {len(provenance)} row provenances for {len(stored['rows'])} rows; re-run the "
+                         f"whole table: {stored['command']}")
     merged, origin = [], []
     for row, made_by in zip(stored["rows"], provenance):
         key = tuple(row[:key_length])
@@ -211,8 +221,9 @@ def problems(record, path="result"):
     if record.get("world") not in (None, world_fingerprint()):
         found.append(f"{path}: stale, made on the datasets of world {record['world']}, this process builds "
                      f"{world_fingerprint()}; re-run: {record['command']}")
-    found += [f"{path}: stale, {change}; re-run: {record['command']}"
-              for change in settings_changes(record.get("settings", {}))]
+    if isinstance(record.get("settings", {}), dict):
+        found += [f"{path}: stale, {change}; re-run: {record['command']}"
+                  for change in settings_changes(record.get("settings", {}))]
     for name, stored in record["checkpoints"].items():
         try:
             shipped = checkpoint_sha256(name)
@@ -291,11 +302,11 @@ def stored_cell(record, key, column, digits=0):
     return tables.interval_cell(stored_value(record, key, column), stored_value(record, key, column, True), digits)
 
 
-# Code changes that move the numbers of results stored before them without changing a checkpoint: the date of
-# the change, what changed and the results it touches.  `python -m facelib results` names them; they are re-run
+# Code changes that move the numbers of results stored before them without changing a checkpoint: the time of
+# the change's commit (as results record their date), what changed and the results it touches.  `python -m facelib results` names them; they are re-run
 # once, after the retrained denoisers (issue 43), and the chapters' live numbers already use the new code.
 CODE_CHANGES = [
-    ("2026-12-05", "one random stream per chain (issue 42: the first reverse step re-added x_T's noise)",
+    ("2026-12-05 03:22 UTC", "one random stream per chain (issue 42: the first reverse step re-added x_T's noise)",
      ("fill_defaults", "filling_table3", "geometry_table4", "geometry_lr", "fine_control_au", "fine_control_keyframes",
       "animate_magnitudes", "text_table2_raw", "text_table2_enriched")),
 ]

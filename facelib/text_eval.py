@@ -183,8 +183,8 @@ def branch_agreement(denoiser, head, encoder, dataset, evaluators, steps, branch
     orders = torch.nn.functional.normalize(order_sentences(dataset.label_names, encoder), dim=-1)  # (2, L, D)
     x0 = torch.as_tensor(denoiser.normalizer.normalize(dataset.landmarks))
     rows = []
-    for k in branch_at:
-        ends = [denoiser.normalizer.denormalize(chain.run(denoiser.model, states[k], 100 + s,
+    for k in branch_at:  # continuation s runs on stream seed + 97 + s, never the chain's own (seed)
+        ends = [denoiser.normalizer.denormalize(chain.run(denoiser.model, states[k], seed + 97 + s,
                                                           chain.schedule(start=k), progress=False)).numpy()
                 for s in range(4)]
         o = np.stack([ev_order.features(e).argmax(1) % 2 for e in ends])

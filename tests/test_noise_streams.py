@@ -74,7 +74,7 @@ def task_calls(test, denoiser, regressor):
         "au (a given face)": lambda s: tasks.au_control(["AU26:1.0"], 2, neutral[0], seed=s, regressor=regressor,
                                                         **small),
         "au": lambda s: tasks.au_control(["AU26:1.0"], 2, seed=s, regressor=regressor, **small),
-        "edit": lambda s: tasks.edit(x, "high_smile", "0:1", seed=s, **small),
+        "edit": lambda s: tasks.edit(x, "high_smile", keep="0:1", seed=s, **small),
     }
 
 

@@ -2,6 +2,8 @@
 guidance networks (classifiers of Alg. 1 and 4, the text head of Alg. 2), each checked against its data."""
 from __future__ import annotations
 
+import dataclasses
+
 from dataclasses import dataclass
 
 import numpy as np
@@ -71,8 +73,9 @@ def load_denoiser(name="denoiser_coma", variance="beta"):
     return TrainedDenoiser(model, LandmarkNormalizer.from_dict(meta["normalizer"]), diffusion, {**meta, "name": name})
 
 
-MAX_SEQUENCES = 100_000  # one call's sequences: 100000 x 40 frames are 13 GB per copy of x_t, already more than one
-# machine holds; a larger n is a mistake, refused before any memory is asked for
+# one call's sequences: 100000 x 40 frames are 3.3 GB (float32) per copy of x_t, and a chain holds several copies;
+# a larger n is a mistake, refused before any memory is asked for
+MAX_SEQUENCES = 100_000
 
 
 def check_n(n, name="n"):
@@ -162,6 +165,9 @@ def guided_chain(guide, denoiser, settings):
 
 def task_settings(settings, overrides, n):
     """The settings of a call (its defaults with the overrides given) and its checked shape (n, F, 68, 3)."""
+    if not dataclasses.is_dataclass(settings) or isinstance(settings, type):
+        raise TypeError(f"settings must be a task's settings (a facelib.config dataclass instance), got "
+                        f"{type(settings).__name__}: {settings!r}; give single fields by keyword, e.g. keep='0:1'")
     settings = with_overrides(settings, overrides)
     check_n(n)
     return settings, (n, check_num_frames(settings.num_frames), NUM_LANDMARKS, 3)

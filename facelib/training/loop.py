@@ -228,7 +228,7 @@ def fit(recipe, progress=True, log_every=50, device=None, resume_from=None, save
     it and ends with the weights, EMA and loss curves of a run that had not stopped, bit for bit on a
     CPU (on a GPU, as far as its kernels are deterministic); the curves' wall-clock "seconds" are the
     only difference.  A state whose record differs from this run's is refused with the fields that
-    differ.  Recipes that walk epochs do not resume."""
+    differ.  Recipes that walk epochs do not resume (a state left by one is refused)."""
     owns_group = not torch.distributed.is_initialized()
     dist = start_distributed(device)
     owns_group = owns_group and torch.distributed.is_initialized()

@@ -301,8 +301,8 @@ class EvaluatorRecipe(Recipe):
         return loss, {"loss": loss.item()}
 
     def model_config(self, model):
-        return {"num_classes": len(self.class_names), "hidden": self.settings.hidden, "num_landmarks": 68,
-                "inputs": self.settings.inputs}
+        return {"num_classes": len(self.class_names), "hidden": self.settings.hidden,
+                "num_landmarks": config.NUM_LANDMARKS, "inputs": self.settings.inputs}
 
     def metadata(self, model):
         return super().metadata(model) | {"class_names": self.class_names}
