@@ -35,6 +35,7 @@ LAYERS = {"config": 0, "face": 1, "metrics": 1, "srvf": 1, "chapters": 1, "paper
           "diffusion": 2, "viz": 2, "meshio": 2, "tables": 2, "text": 3, "models": 3, "checkpoints": 3, "guidance": 4,
           "inpainting": 4, "rig_fit": 4, "toy": 4, "results": 4, "baselines": 5, "deformation": 5, "evaluation": 5,
           "tasks": 6, "text_eval": 6, "pipeline": 7, "experiments": 7, "training": 7, "cli_sample": 8, "__main__": 9}
-__all__ = ["baselines", "chapters", "checkpoints", "cli_sample", "config", "data", "deformation", "descriptions", "experiments",
+__all__ = ["baselines", "chapters", "checkpoints", "cli_sample", "config", "data", "deformation", "descriptions",
+           "experiments",
            "diffusion", "evaluation", "face", "guidance", "inpainting", "meshio", "metrics", "models", "paper",
            "pipeline", "results", "rig_fit", "srvf", "tables", "tasks", "text", "text_eval", "toy", "training", "viz"]

@@ -105,7 +105,8 @@ def load_checkpoint(name, kind, build):
     """
     pt, js = checkpoint_paths(name)
     if not (config.DATA_DIR / "checkpoints").is_dir():
-        raise FileNotFoundError(f"facelib's data folder (data/checkpoints, data/synthetic) is not at {config.DATA_DIR}: "
+        raise FileNotFoundError(f"facelib's data folder (data/checkpoints, data/synthetic) is not at "
+                                f"{config.DATA_DIR}: "
                                 "`pip install .` installs the code only; set FACELIB_DATA_DIR to the data/ folder of "
                                 "a clone of the book (or install the clone with `pip install -e .`)")
     if not pt.exists() or not js.exists():

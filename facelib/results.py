@@ -6,14 +6,14 @@ its table here together with what is needed to trust and to re-run it: the exact
 facelib commit, the sha256 of every checkpoint it used, the seeds, n, steps, the wall time and
 the number of cores.
 
-A stored result is *stale* when a checkpoint it names no longer has the sha256 it recorded (the
-model was retrained after the experiment ran), when the datasets it records were built by another world
-(their fingerprint changed), or when a default of the settings it records (the config dataclasses a benchmark
-names as measured) has changed since (e.g. ``config.Fill.steps``): :func:`problems` says so, naming the file and what changed, and a test fails on
-every stale or malformed file.  Files are written to a temporary file and renamed, so an interrupted
-command leaves the previous result intact.  A result is not saved from a tree whose facelib/ or
-benchmarks/ have uncommitted changes (its commit would not name the code that made it), unless the
-command's ``--allow-dirty`` says so, which the result then records.  Rows merged from several runs
+A stored result is *stale* when a checkpoint it names no longer has the sha256 it recorded (the model was
+retrained after the experiment ran), when the datasets it records were built by another world (their
+fingerprint changed), or when a default of the settings it records (the config dataclasses a benchmark names
+as measured) has changed since (e.g. ``config.Fill.steps``): :func:`problems` says so, naming the file and
+what changed, and a test fails on every stale or malformed file. Files are written to a temporary file and
+renamed, so an interrupted command leaves the previous result intact. A result is not saved from a tree whose
+facelib/ or benchmarks/ have uncommitted changes (its commit would not name the code that made it), unless the
+command's ``--allow-dirty`` says so, which the result then records. Rows merged from several runs
 (:func:`merged_rows`) each keep the provenance of the run that made them (``row_provenance``).
 """
 from __future__ import annotations
@@ -303,8 +303,9 @@ def stored_cell(record, key, column, digits=0):
 
 
 # Code changes that move the numbers of results stored before them without changing a checkpoint: the time of
-# the change's commit (as results record their date), what changed and the results it touches.  `python -m facelib results` names them; they are re-run
-# once, after the retrained denoisers (issue 43), and the chapters' live numbers already use the new code.
+# the change's commit (as results record their date), what changed and the results it touches.  `python -m
+# facelib results` names them; they are re-run once, after the retrained denoisers (issue 43), and the chapters'
+# live numbers already use the new code.
 CODE_CHANGES = [
     ("2026-12-05 03:22 UTC", "one random stream per chain (issue 42: the first reverse step re-added x_T's noise)",
      ("fill_defaults", "filling_table3", "geometry_table4", "geometry_lr", "fine_control_au", "fine_control_keyframes",

@@ -14,9 +14,7 @@ import numpy as np
 import torch
 
 from .. import data, rig_fit
-from ..config import (NUM_FRAMES, NUM_LANDMARKS, AU_ACTIVE, AU_CURVE_LR, AU_MEASURABLE_FIT_ERROR, AU_REQUEST_PEAK,
-                      AU_REQUEST_PEAK_FRAMES,
-                      AUControl)
+from ..config import AU_ACTIVE, AU_CURVE_LR, AU_MEASURABLE_FIT_ERROR, NUM_FRAMES, NUM_LANDMARKS, AUControl
 from ..face.aus import AU_NAMES
 from ..guidance import AUCurveScore, MeanShiftGuidance, OptimisationGuidance, ReconstructionGuidance, chain
 from ..inpainting import KnownFrames, check_finite_landmarks, keep_known, landmark_array
@@ -180,8 +178,8 @@ def regressor_curves(sequences, regressor=None, dataset="coma"):
 
 def measurable_aus(floor, dataset="coma", max_error=AU_MEASURABLE_FIT_ERROR):
     """The AUs that requests may use when the result is scored by the rig fit: those whose fit error on real
-    sequences (``floor``, :func:`facelib.experiments.fit_floor`) is at most ``max_error``, that the data push to at least 0.5, and not
-    the blink AU45 (a blink is over in a few frames)."""
+    sequences (``floor``, :func:`facelib.experiments.fit_floor`) is at most ``max_error``, that the data push to
+    at least 0.5, and not the blink AU45 (a blink is over in a few frames)."""
     ranges = data_ranges(dataset)
     return [a for a, e in floor.items() if e <= max_error and ranges[a][1] >= 0.5 and a != "AU45"]
 

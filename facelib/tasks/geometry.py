@@ -95,7 +95,8 @@ def geometry_passes(neutral_landmarks, label, n=1, settings=GeometryAdaptive(), 
         else:  # Alg. 4 line 6: x_k = sqrt(abar_k) x_0 + sqrt(1 - abar_k) eps on every frame
             start, first = diffusion.q_sample(x, restart, generator=gen), restart
         steps = diffusion.schedule(first, resample=settings.resample)
-        x = diffusion.run(denoiser.model, start, gen, steps, hook, progress=progress).detach()  # x_T's stream, continued
+        # the chain continues the stream its start was drawn from
+        x = diffusion.run(denoiser.model, start, gen, steps, hook, progress=progress).detach()
         results.append(keep_known(denoiser.to_mm(x), given, mask))
     return np.stack(results)
 

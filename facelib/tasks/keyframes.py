@@ -23,7 +23,6 @@ import numpy as np
 import torch
 
 from ..checkpoints import checkpoint_name
-from .. import data
 from ..config import NUM_FRAMES, NUM_LANDMARKS, KEYFRAME_TOLERANCE, Keyframes
 from ..guidance import ReconstructionGuidance
 from ..inpainting import LANDMARK_LIMIT_MM, KnownFrames, check_finite_landmarks, landmark_array

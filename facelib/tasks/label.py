@@ -2,9 +2,6 @@
 not in the paper, classifier-free guidance of a label-conditional denoiser."""
 from __future__ import annotations
 
-import numpy as np
-
-from .. import data
 from ..checkpoints import checkpoint_name
 from ..config import NUM_DIFFUSION_STEPS, ADAGRAD_LR, LR_REFERENCE_STEPS, LabelControl
 from ..guidance import ClassifierFree, ClassifierScore, MeanShiftGuidance, OptimisationGuidance

@@ -6,7 +6,6 @@ that its recorded settings are these, so ``python -m facelib train all`` rebuild
 """
 from __future__ import annotations
 
-from .. import config
 from ..checkpoints import checkpoint_name
 
 _DEFORMER_METHODS = ("ours", "no_attention", "s2d", "coma", "linear")
@@ -19,7 +18,8 @@ SHIPPED = {
     "guide_coma_S": ("guide", {"classifier_type": "S"}),
     "guide_bu_I": ("guide", {"dataset": "bu"}),
     "guide_coma+bu_text": ("text_head", {}),
-    **{checkpoint_name("ic", d, c): ("evaluator", {"dataset": d, "classifier_type": c}) for d in ("coma", "bu", "coma+bu")
+    **{checkpoint_name("ic", d, c): ("evaluator", {"dataset": d, "classifier_type": c})
+       for d in ("coma", "bu", "coma+bu")
        for c in ("I", "S")},
     "actor_coma": ("actor", {}),
     "actor_bu": ("actor", {"dataset": "bu"}),
