@@ -25,7 +25,7 @@ from .fill import fill
 from .keyframes import (check_keys, key_errors, key_speeds, keyframe_report, keyframes, read_constraints,
                         real_speed_p95)
 from .geometry import geometry_adaptive, geometry_passes, order_sensitive_label
-from .label import (adagrad_lr, check_labels, label_control, label_sampler, load_conditional_denoiser, step_scaled_lr)
+from .label import adagrad_lr, check_labels, label_control, label_sampler, load_conditional_denoiser, step_scaled_lr
 from .loading import (TrainedDenoiser, TrainedGuide, check_same_space, load_au_regressor, load_denoiser, load_guide,
                       load_text_head)
 from .text import text_control, text_guidance_weight, text_lr, text_score
@@ -34,7 +34,7 @@ from .unconditional import unconditional
 __all__ = ["check_keys", "key_errors", "key_speeds", "keyframe_report", "keyframes", "read_constraints",
            "real_speed_p95", "AU_GUIDANCE_OFF", "au_control", "curve_errors", "data_ranges",
            "fitted_curves", "measurable_aus", "never_together", "parse_curve", "requested_curves",
-           "regressor_curves", "load_au_regressor",
+           "regressor_curves", "load_au_regressor", "active_aus", "requested_aus",
            "decoder_then_diffusion", "check_sequences", "edit", "invert", "keep_on_path", "check_labels",
            "label_sampler", "load_conditional_denoiser", "fill", "geometry_adaptive",
            "geometry_passes", "order_sensitive_label", "adagrad_lr", "label_control",
