@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
+from scipy.stats import ks_2samp
 
 from . import data, metrics
 from .checkpoints import checkpoint_name, load_checkpoint
@@ -85,6 +86,44 @@ class Evaluator:
         """The GT row: the held-out test sequences scored like generated ones."""
         test = data.load_dataset(self.dataset, "test")
         return self.score(test.landmarks, test.targets(self.classifier_type), seed=seed, intervals=intervals)
+
+    def coverage(self, sequences, k=5, num_subsets=1000, num_resamples=200, seed=0):
+        """What ``sequences`` (n, F, 68, 3) in mm cover of the training split, and the test split as the reference
+        row (an ideal generator would score like it); the coverage protocol of the evaluation chapter:
+
+        * "label_tv": the total variation between the IC's label mix of the sequences and of the training split,
+          with "label_tv_real_p95": the 95th percentile of the same statistic over random real test subsets of
+          the same size (:func:`metrics.subset_total_variations`), and "label_mix" the sequences' own mix;
+        * "amplitudes": per region (:func:`metrics.amplitudes`) the 50th and 90th percentiles (mm) and the
+          two-sample Kolmogorov-Smirnov p-value against the test split;
+        * precision, recall, density, coverage of the IC features against the training split's (k-NN balls,
+          :func:`metrics.precision_recall_coverage`), each with a 95 % bootstrap interval over the sequences
+          (resampling repeats rows, which shrinks their balls: the intervals are rough).
+        Returns {"generated": ..., "test": ...}, the same keys for each."""
+        test = data.load_dataset(self.dataset, "test")
+        train_mix = metrics.label_histogram(self.reference_features.argmax(1), len(self.class_names))
+        test_amplitudes = metrics.amplitudes(test.landmarks)
+        test_predicted = self.features(test.landmarks).argmax(1)
+
+        def measure(x):
+            f = self.features(x)
+            mix = metrics.label_histogram(f.argmax(1), len(self.class_names))
+            amp = metrics.amplitudes(x)
+            row = {"n": len(x), "label_mix": dict(zip(self.class_names, mix.round(4).tolist())),
+                   "label_tv": metrics.total_variation(mix, train_mix),
+                   "label_tv_real_p95": float(np.percentile(metrics.subset_total_variations(
+                       test_predicted, train_mix, min(len(x), len(test_predicted)), num_subsets, seed), 95)),
+                   "amplitudes": {region: {"p50": float(np.percentile(a, 50)), "p90": float(np.percentile(a, 90)),
+                                           "ks_p_vs_test": float(ks_2samp(a, test_amplitudes[region]).pvalue)}
+                                  for region, a in amp.items()}}
+            for name in ("precision", "recall", "density", "coverage"):
+                def statistic(g, name=name):
+                    return metrics.precision_recall_coverage(self.reference_features, g, k)[name]
+                row[name] = statistic(f)
+                low, high = metrics.bootstrap_interval(statistic, f, num_resamples=num_resamples, seed=seed)
+                row[name + "_ci"] = (max(low, 0.0), high if name == "density" else min(high, 1.0))
+            return row
+        return {"generated": measure(check_sequences(sequences)), "test": measure(test.landmarks)}
 
     def class_index(self, name):
         """Index of a class name; a clear error listing the valid names otherwise."""

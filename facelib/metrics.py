@@ -1,5 +1,6 @@
 """Evaluation metrics (paper §5): accuracy, confusion matrix, FID, diversity, the realism checks of
-the denoiser chapter and the filling metrics (error on missing frames, seam smoothness)."""
+the denoiser chapter, the filling metrics (error on missing frames, seam smoothness) and coverage: the label
+mix, each region's amplitude, precision, recall, density and coverage of features."""
 from __future__ import annotations
 
 import numpy as np
@@ -222,3 +223,98 @@ def completion_spread(completions, known):
     pairs = [(a, b) for a in range(c.shape[1]) for b in range(a + 1, c.shape[1])]
     dist = np.stack([np.linalg.norm(c[:, a] - c[:, b], axis=-1).mean(-1) for a, b in pairs])  # (pairs, n, F)
     return np.array([dist[:, i, ~m[i]].mean() for i in range(len(m))])
+
+
+# ----------------------------------------------------------------------------- coverage (issue 43)
+# What a generator fails to produce, which means and nearest neighbours do not see: the label mix, the amplitude
+# of each region's motion, and how much of the data's feature distribution the samples reach.
+
+AMPLITUDE_REGIONS = ("mouth opening", "mouth-corner excursion", "brow raise", "eye closure")
+_BROW_EYE = ((19, 37), (24, 44))  # middle of each brow to the upper lid below it (iBUG-68)
+_LIDS = ((37, 41), (38, 40), (43, 47), (44, 46))  # upper to lower eyelid, both eyes
+_CORNERS = (48, 54)
+
+
+def amplitudes(sequences):
+    """Each sequence's largest motion of four regions (mm), {region: (n,)} (:data:`AMPLITUDE_REGIONS`):
+
+    * mouth opening: the largest inner-lip gap (landmarks 62-66) over the frames;
+    * mouth-corner excursion: the diameter of a mouth corner's path (the largest distance between two of its
+      positions), the larger of the two corners: how far a smile or a pull moves it, wherever the face starts;
+    * brow raise: the range over frames of the brow-to-upper-lid distance (landmarks 19-37, 24-44, averaged);
+    * eye closure: the range over frames of the eyelid gap (four lid pairs, averaged).
+    Ranges and diameters read a sequence's motion from N2E and E2N alike and ignore where the face sits."""
+    x = np.asarray(sequences, dtype=np.float64)
+    if x.ndim != 4 or x.shape[2:] != (68, 3) or x.shape[1] < 2:
+        raise ValueError(f"expected landmark sequences (n, F >= 2, 68, 3), got {x.shape}")
+
+    def distance(pairs):
+        return np.mean([np.linalg.norm(x[:, :, i] - x[:, :, j], axis=-1) for i, j in pairs], axis=0)  # (n, F)
+
+    def diameter(k):
+        p = x[:, :, k]  # (n, F, 3)
+        return np.linalg.norm(p[:, :, None] - p[:, None], axis=-1).max((1, 2))
+
+    brow, lids = distance(_BROW_EYE), distance(_LIDS)
+    return {"mouth opening": pair_distance(x, "inner lip gap").max(1),
+            "mouth-corner excursion": np.maximum(*(diameter(k) for k in _CORNERS)),
+            "brow raise": brow.max(1) - brow.min(1), "eye closure": lids.max(1) - lids.min(1)}
+
+
+def label_histogram(labels, num_classes):
+    """The share of each class (num_classes,) among integer ``labels``."""
+    labels = np.asarray(labels)
+    if labels.ndim != 1 or len(labels) == 0 or labels.min() < 0 or labels.max() >= num_classes:
+        raise ValueError(f"labels must be a non-empty 1-D array of classes in 0..{num_classes - 1}")
+    return np.bincount(labels, minlength=num_classes) / len(labels)
+
+
+def total_variation(p, q):
+    """Total variation distance 1/2 sum |p - q| between two histograms (0: the same mix, 1: disjoint)."""
+    p, q = np.asarray(p, dtype=np.float64), np.asarray(q, dtype=np.float64)
+    if p.shape != q.shape:
+        raise ValueError(f"histograms of different lengths: {p.shape} and {q.shape}")
+    return float(0.5 * np.abs(p - q).sum())
+
+
+def subset_total_variations(labels, reference, size, num_subsets=1000, seed=0):
+    """The reference for a generated set's label mix: the total variation to ``reference`` (a histogram) of
+    ``num_subsets`` random subsets of ``size`` of real ``labels`` (without replacement): how far a real set of
+    that size strays by chance alone.  Returns (num_subsets,)."""
+    labels = np.asarray(labels)
+    if not 1 <= size <= len(labels):
+        raise ValueError(f"subset size must be in 1..{len(labels)}, got {size}")
+    rng = np.random.default_rng(seed)
+    k = len(reference)
+    return np.array([total_variation(label_histogram(labels[rng.choice(len(labels), size, replace=False)], k),
+                                     reference) for _ in range(num_subsets)])
+
+
+def _kth_neighbour_radii(features, k):
+    """Distance of each row of ``features`` to its k-th nearest other row."""
+    d = np.linalg.norm(features[:, None] - features[None], axis=-1)
+    np.fill_diagonal(d, np.inf)
+    return np.sort(d, axis=1)[:, k - 1]
+
+
+def precision_recall_coverage(real, generated, k=5):
+    """Fidelity and coverage of generated features against real ones (rows are sequences; the IC's features):
+
+    * precision (Kynkäänniemi et al. 2019): the share of generated rows inside some real row's k-NN ball;
+    * recall: the share of real rows inside some generated row's k-NN ball (the data the generator reaches);
+    * density (Naeem et al. 2020): the mean number of real balls a generated row falls in, divided by k;
+    * coverage (Naeem et al. 2020): the share of real rows whose own k-NN ball holds a generated row, which,
+      unlike recall, a few outlying samples cannot inflate.
+    Returns a dict of the four (Python floats)."""
+    real, generated = np.asarray(real, dtype=np.float64), np.asarray(generated, dtype=np.float64)
+    if real.ndim != 2 or generated.ndim != 2 or real.shape[1] != generated.shape[1]:
+        raise ValueError(f"need feature matrices (n, D) of one width, got {real.shape} and {generated.shape}")
+    if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 1 <= k < min(len(real), len(generated)):
+        raise ValueError(f"k must be an integer in 1..{min(len(real), len(generated)) - 1}, got {k!r}")
+    real_radii, generated_radii = _kth_neighbour_radii(real, k), _kth_neighbour_radii(generated, k)
+    d = np.linalg.norm(generated[:, None] - real[None], axis=-1)  # (generated, real)
+    inside_real = d <= real_radii[None]
+    return {"precision": float(inside_real.any(1).mean()),
+            "recall": float((d <= generated_radii[:, None]).any(0).mean()),
+            "density": float(inside_real.sum(1).mean() / k),
+            "coverage": float((d.min(0) <= real_radii).mean())}
