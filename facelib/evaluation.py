@@ -93,7 +93,8 @@ class Evaluator:
 
         * "label_tv": the total variation between the IC's label mix of the sequences and of the training split,
           with "label_tv_real_p95": the 95th percentile of the same statistic over random real test subsets of
-          the same size (:func:`metrics.subset_total_variations`), and "label_mix" the sequences' own mix;
+          the same size drawn from the test split (:func:`metrics.subset_total_variations`), and "label_mix" the
+          sequences' own mix;
         * "amplitudes": per region (:func:`metrics.amplitudes`) the 50th and 90th percentiles (mm) and the
           two-sample Kolmogorov-Smirnov p-value against the test split;
         * precision, recall, density, coverage of the IC features against the training split's (k-NN balls,
@@ -112,7 +113,7 @@ class Evaluator:
             row = {"n": len(x), "label_mix": dict(zip(self.class_names, mix.round(4).tolist())),
                    "label_tv": metrics.total_variation(mix, train_mix),
                    "label_tv_real_p95": float(np.percentile(metrics.subset_total_variations(
-                       test_predicted, train_mix, min(len(x), len(test_predicted)), num_subsets, seed), 95)),
+                       test_predicted, train_mix, len(x), num_subsets, seed), 95)),
                    "amplitudes": {region: {"p50": float(np.percentile(a, 50)), "p90": float(np.percentile(a, 90)),
                                            "ks_p_vs_test": float(ks_2samp(a, test_amplitudes[region]).pvalue)}
                                   for region, a in amp.items()}}

@@ -279,15 +279,15 @@ def total_variation(p, q):
 
 def subset_total_variations(labels, reference, size, num_subsets=1000, seed=0):
     """The reference for a generated set's label mix: the total variation to ``reference`` (a histogram) of
-    ``num_subsets`` random subsets of ``size`` of real ``labels`` (without replacement): how far a real set of
-    that size strays by chance alone.  Returns (num_subsets,)."""
+    ``num_subsets`` random sets of ``size`` real ``labels`` drawn with replacement (so that a set as large as the
+    real one still varies): how far a real set of that size strays by chance alone.  Returns (num_subsets,)."""
     labels = np.asarray(labels)
-    if not 1 <= size <= len(labels):
-        raise ValueError(f"subset size must be in 1..{len(labels)}, got {size}")
+    if isinstance(size, bool) or not isinstance(size, (int, np.integer)) or size < 1 or len(labels) == 0:
+        raise ValueError(f"need real labels and a positive subset size, got {len(labels)} labels and size {size!r}")
     rng = np.random.default_rng(seed)
     k = len(reference)
-    return np.array([total_variation(label_histogram(labels[rng.choice(len(labels), size, replace=False)], k),
-                                     reference) for _ in range(num_subsets)])
+    return np.array([total_variation(label_histogram(labels[rng.integers(0, len(labels), size)], k), reference)
+                     for _ in range(num_subsets)])
 
 
 def _kth_neighbour_radii(features, k):
