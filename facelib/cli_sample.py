@@ -94,10 +94,7 @@ def read_npz_array(path, keys, what):
                 raise ValueError("not an .npz archive")
             for key in keys:
                 if key in f:
-                    x = f[key]
-                    if x.dtype.kind not in "iuf":
-                        raise ValueError(f"{key!r} holds {x.dtype} values, not real numbers (landmarks in mm)")
-                    return x.astype(np.float64)
+                    return inpainting.landmark_array(f[key], repr(key))
             found = list(f.keys())
     except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as e:
         raise ValueError(f"cannot read {what} from {path}: {e}") from None

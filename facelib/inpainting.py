@@ -22,6 +22,7 @@ from typing import Callable, Optional
 import numpy as np
 import torch
 
+from .config import NUM_LANDMARKS
 from .diffusion import GaussianDiffusion
 
 FILL_SETTINGS = ("FFB", "FFE", "FFM")  # §5.3: filling from the beginning, the end, the middle
@@ -51,6 +52,21 @@ def check_finite_landmarks(x, what):
     if x.size and np.abs(x).max() > LANDMARK_LIMIT_MM:
         raise ValueError(f"{what} reach {np.abs(x).max():.3g} mm: landmark coordinates must be in mm, within "
                          f"+-{LANDMARK_LIMIT_MM:g}")
+
+
+def neutral_faces(values, n=None, what="the neutral face"):
+    """A face's neutral landmarks in mm as a checked (68, 3) array, or with ``n`` as (n, 68, 3) (a single face
+    repeated n times); a clear error for another shape, text, NaN, infinities or values beyond
+    :data:`LANDMARK_LIMIT_MM`.  The one check of every task given a face (AU control, geometry, keyframes)."""
+    x = landmark_array(values, what)
+    wanted = (NUM_LANDMARKS, 3) if n is None else (n, NUM_LANDMARKS, 3)
+    if n is not None and x.shape == (NUM_LANDMARKS, 3):
+        x = np.broadcast_to(x, wanted)
+    if x.shape != wanted:
+        allowed = "(68, 3)" + ("" if n is None else f" or (n={n}, 68, 3)")
+        raise ValueError(f"{what} must be finite landmarks of shape {allowed} in mm, got {np.shape(values)}")
+    check_finite_landmarks(x, f"{what}'s landmarks")
+    return x
 
 
 def check_known_mask(mask, num_frames=None):

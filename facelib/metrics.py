@@ -298,20 +298,27 @@ def _kth_neighbour_radii(features, k):
 
 
 def precision_recall_coverage(real, generated, k=5):
-    """Fidelity and coverage of generated features against real ones (rows are sequences; the IC's features):
+    """Fidelity and coverage of generated features against real ones (rows: sequences):
 
-    * precision (Kynkäänniemi et al. 2019): the share of generated rows inside some real row's k-NN ball;
-    * recall: the share of real rows inside some generated row's k-NN ball (the data the generator reaches);
-    * density (Naeem et al. 2020): the mean number of real balls a generated row falls in, divided by k;
-    * coverage (Naeem et al. 2020): the share of real rows whose own k-NN ball holds a generated row, which,
-      unlike recall, a few outlying samples cannot inflate.
+    * precision (Kynkäänniemi et al. 2019): the share of generated rows inside some
+      real row's k-NN ball;
+    * recall: the share of real rows inside some generated row's k-NN ball (the data
+      the generator reaches);
+    * density (Naeem et al. 2020): the mean number of real balls a generated row
+      falls in, divided by k;
+    * coverage (Naeem et al. 2020): the share of real rows whose own k-NN ball holds
+      a generated row, which, unlike recall, a few outlying samples cannot inflate.
     Returns a dict of the four (Python floats)."""
-    real, generated = np.asarray(real, dtype=np.float64), np.asarray(generated, dtype=np.float64)
+    real = np.asarray(real, dtype=np.float64)
+    generated = np.asarray(generated, dtype=np.float64)
     if real.ndim != 2 or generated.ndim != 2 or real.shape[1] != generated.shape[1]:
-        raise ValueError(f"need feature matrices (n, D) of one width, got {real.shape} and {generated.shape}")
-    if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 1 <= k < min(len(real), len(generated)):
-        raise ValueError(f"k must be an integer in 1..{min(len(real), len(generated)) - 1}, got {k!r}")
-    real_radii, generated_radii = _kth_neighbour_radii(real, k), _kth_neighbour_radii(generated, k)
+        raise ValueError(f"need feature matrices (n, D) of one width, got {real.shape} "
+                         f"and {generated.shape}")
+    largest = min(len(real), len(generated)) - 1
+    if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 1 <= k <= largest:
+        raise ValueError(f"k must be an integer in 1..{largest}, got {k!r}")
+    real_radii = _kth_neighbour_radii(real, k)
+    generated_radii = _kth_neighbour_radii(generated, k)
     d = np.linalg.norm(generated[:, None] - real[None], axis=-1)  # (generated, real)
     inside_real = d <= real_radii[None]
     return {"precision": float(inside_real.any(1).mean()),

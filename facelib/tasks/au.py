@@ -14,10 +14,10 @@ import numpy as np
 import torch
 
 from .. import data, rig_fit
-from ..config import AU_ACTIVE, AU_CURVE_LR, AU_MEASURABLE_FIT_ERROR, NUM_FRAMES, NUM_LANDMARKS, AUControl
+from ..config import AU_ACTIVE, AU_CURVE_LR, AU_MEASURABLE_FIT_ERROR, NUM_FRAMES, AUControl
 from ..face.aus import AU_NAMES
 from ..guidance import AUCurveScore, MeanShiftGuidance, OptimisationGuidance, ReconstructionGuidance, chain
-from ..inpainting import KnownFrames, check_finite_landmarks, keep_known, landmark_array
+from ..inpainting import KnownFrames, keep_known, neutral_faces
 from .fill import known_noise
 from .label import step_scaled_lr
 from .loading import guided_chain, load_au_regressor, task_settings
@@ -140,12 +140,7 @@ def no_au_score(x, t):
 def neutral_frame(neutral, shape):
     """The given frames (n, F, 68, 3) and the known mask (n, F) of a face's neutral landmarks (68, 3) or
     (n, 68, 3) put at frame 0 (a clear error for another shape or a non-finite value)."""
-    x = landmark_array(neutral, "the neutral face")
-    x = np.broadcast_to(x, (shape[0], NUM_LANDMARKS, 3)) if x.shape == (NUM_LANDMARKS, 3) else x
-    if x.shape != (shape[0], NUM_LANDMARKS, 3) or not np.isfinite(x).all():
-        raise ValueError(f"the neutral face must be finite landmarks of shape (68, 3) or (n={shape[0]}, 68, 3), "
-                         f"got {np.shape(neutral)}")
-    check_finite_landmarks(x, "the neutral face's landmarks")
+    x = neutral_faces(neutral, shape[0])
     given, known = np.zeros(shape), np.zeros(shape[:2], dtype=bool)
     given[:, 0], known[:, 0] = x, True
     return given, known

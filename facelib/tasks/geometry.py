@@ -8,7 +8,7 @@ import torch
 from .. import data
 from ..config import NUM_LANDMARKS, GeometryAdaptive
 from ..guidance import ClassifierScore, OptimisationGuidance, ReconstructionGuidance, chain
-from ..inpainting import KnownFrames, check_finite_landmarks, keep_known, landmark_array
+from ..inpainting import KnownFrames, keep_known, neutral_faces
 from .fill import known_noise
 from .loading import guided_chain, load_guide, task_settings
 
@@ -35,13 +35,7 @@ def _known_neutral(neutral_landmarks, names, num_frames):
     """The given frames (n, F, 68, 3) in mm and the mask S_K (n, F): the neutral face is frame 1 for N2E
     and frame F for E2N (§5.4)."""
     n = len(names)
-    neutral = landmark_array(neutral_landmarks, "the neutral landmarks")
-    if neutral.shape == (NUM_LANDMARKS, 3):
-        neutral = np.broadcast_to(neutral, (n, NUM_LANDMARKS, 3))
-    if neutral.shape != (n, NUM_LANDMARKS, 3):
-        raise ValueError(f"neutral landmarks must have shape (68, 3) or (n={n}, 68, 3), "
-                         f"got {np.shape(neutral_landmarks)}")
-    check_finite_landmarks(neutral, "the neutral landmarks")
+    neutral = neutral_faces(neutral_landmarks, n, "the neutral landmarks")
     mask = np.zeros((n, num_frames), dtype=bool)
     mask[np.arange(n), [0 if y.endswith("N2E") else -1 for y in names]] = True
     given = np.zeros((n, num_frames, NUM_LANDMARKS, 3))

@@ -25,7 +25,7 @@ import torch
 from ..checkpoints import checkpoint_name
 from ..config import NUM_FRAMES, NUM_LANDMARKS, KEYFRAME_TOLERANCE, Keyframes
 from ..guidance import ReconstructionGuidance
-from ..inpainting import LANDMARK_LIMIT_MM, KnownFrames, check_finite_landmarks, landmark_array
+from ..inpainting import LANDMARK_LIMIT_MM, KnownFrames, landmark_array, neutral_faces
 from .fill import known_noise
 from .loading import load_denoiser, task_settings
 
@@ -84,11 +84,7 @@ def read_constraints(path):
 
 def check_neutral(neutral):
     """A neutral face's landmarks as a finite (68, 3) array (a clear error otherwise)."""
-    x = landmark_array(neutral, "the neutral face")
-    if x.shape != (NUM_LANDMARKS, 3) or not np.isfinite(x).all():
-        raise ValueError(f"the neutral face must be 68 x 3 finite landmark coordinates (mm), got shape {x.shape}")
-    check_finite_landmarks(x, "the neutral face's landmarks")
-    return x
+    return neutral_faces(neutral)
 
 
 def keyframes(keys, n=4, neutral=None, settings=Keyframes(), denoiser=None, progress=True, **overrides):
