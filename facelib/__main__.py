@@ -2,6 +2,8 @@
 from __future__ import annotations
 
 import argparse
+import ast
+import dataclasses
 import io as bytes_io
 import json
 import sys
@@ -42,14 +44,49 @@ def _data(args):
 TRAINABLE = tuple(training.RECIPES)  # every recipe is trainable
 
 
+def _setting(model_name, assignment):
+    """``--set NAME=VALUE`` as (name, value), the value read as the setting's type ('none': None; tuples and
+    lists as Python literals); a clear error for an unknown name or a value of the wrong type."""
+    name, sep, text = assignment.partition("=")
+    known = {f.name: f for f in dataclasses.fields(training.SETTINGS[model_name])}
+    if not sep or name not in known:
+        raise ValueError(f"--set {assignment!r}: expected NAME=VALUE with NAME a setting of {model_name} "
+                         f"({', '.join(known)})")
+    kind = str(known[name].type)
+    if text.lower() == "none" and ("None" in kind or kind == "object"):
+        return name, None
+    if "bool" in kind:
+        if text.lower() not in ("true", "false"):
+            raise ValueError(f"--set {name}: true or false, got {text!r}")
+        return name, text.lower() == "true"
+    if "tuple" in kind or kind == "object":
+        try:
+            value = ast.literal_eval(text)
+        except (ValueError, SyntaxError):
+            raise ValueError(f"--set {name}: a Python literal such as (35, 45) or 40, got {text!r}") from None
+        return name, tuple(value) if isinstance(value, list) else value
+    try:
+        return name, cli_sample._converter(kind, name)(text)
+    except argparse.ArgumentTypeError as e:
+        raise ValueError(f"--set {name}: {e}".replace(f"--{name.replace('_', '-')} ", "")) from None
+
+
 def _train(args):
     if args.name == "all":
+        if args.set:
+            raise ValueError("--set changes one recipe's settings; train all trains the shipped ones as they are")
         training.train_all(args.only, fast=args.fast, out_dir=args.out, missing=args.missing, resume=args.resume)
         return 0
     given = {"dataset": args.dataset, "classifier_type": args.type, "method": args.method, "split": args.split,
              "steps": args.steps, "batch_size": args.batch_size, "seed": args.seed,
              "num_frames": (35, 45) if args.variable_length else None, "conditional": args.conditional or None}
-    recipe = training.recipe(args.name, fast=args.fast, **{k: v for k, v in given.items() if v is not None})
+    given = {k: v for k, v in given.items() if v is not None}
+    for assignment in args.set:
+        name, value = _setting(args.name, assignment)
+        if name in given:
+            raise ValueError(f"--set {name} repeats a setting given by its own option or an earlier --set")
+        given[name] = value
+    recipe = training.recipe(args.name, fast=args.fast, **given)
     t0 = time.perf_counter()
     written = training.train_and_save(recipe, name=args.out, device=args.device, resume=args.resume)
     if written:
@@ -156,6 +193,9 @@ def main(argv=None):
     p.add_argument("--conditional", action="store_true", help="denoiser: label-conditional, for classifier-free "
                    "guidance (labels dropped with probability config.DenoiserTraining.condition_dropout; checkpoint "
                    "denoiser_<dataset>_cfg)")
+    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="any other setting of the "
+                   "recipe (facelib/config.py; repeatable), e.g. denoiser: --set prediction=v --set min_snr_gamma=5 "
+                   "--set mirror=0.5 --set schedule=cosine; 'none' for None")
     p.add_argument("--only", nargs="+", default=None, help="train all: only these shipped checkpoints")
     p.add_argument("--missing", action="store_true", help="train all: skip the checkpoints that exist and were "
                    "trained on this world's datasets (config.WORLD)")

@@ -85,6 +85,14 @@ SPLITS = ("train", "test", "all")
 # Every model is trained by the one loop of facelib/training/loop.py; these are its recipes' settings.
 # A field's comment says where its value comes from: the paper (§, Eq.) or "our choice" and why.
 OPTIMIZERS = ("adam", "adamw")
+# What a denoiser's network outputs (models.denoiser converts each to eps): the noise (paper, Eq. 8), the clean
+# sequence x_0 (MDM, Tevet et al. 2023) or the velocity v = sqrt(abar_t) eps - sqrt(1 - abar_t) x_0 (Salimans & Ho 2022)
+PREDICTIONS = ("eps", "x0", "v")
+
+
+def check_prediction(prediction):
+    if prediction not in PREDICTIONS:
+        raise ValueError(f"unknown prediction target {prediction!r}; allowed: {', '.join(PREDICTIONS)}")
 
 
 def _check_positive_int(name, value):
@@ -156,6 +164,9 @@ class DenoiserTraining(Optimisation):
     num_frames: object = NUM_FRAMES  # paper §4: 40 frames; (35, 45) for the variable-length model of App. A
     num_diffusion_steps: int = NUM_DIFFUSION_STEPS  # paper §4: T = 2000
     schedule: str = "linear"  # paper §4: linear betas from 1e-4 to 0.02
+    prediction: str = "eps"  # paper, Eq. 8: the network predicts the noise ("x0": MDM's; "v": Salimans & Ho 2022)
+    min_snr_gamma: float | None = None  # paper: None (the simple loss); a number: min-SNR-gamma (Hang et al. 2023)
+    mirror: float = 0.0  # our option: probability that a training sequence is mirrored left to right
     anatomy_pool: tuple = ("coma", "bu")  # our choice: training faces of these datasets (9 + 81)
     anatomy_swap: float = 0.5  # our choice: probability that a sequence gets another anatomy
     conditional: bool = False  # True: label-conditional, for classifier-free guidance (Ho & Salimans 2022)
@@ -167,6 +178,11 @@ class DenoiserTraining(Optimisation):
             raise ValueError(f"anatomy_swap is a probability in [0, 1], got {self.anatomy_swap}")
         if not 0 <= self.condition_dropout < 1:
             raise ValueError(f"condition_dropout is a probability in [0, 1), got {self.condition_dropout}")
+        if not 0 <= self.mirror <= 1:
+            raise ValueError(f"mirror is a probability in [0, 1], got {self.mirror}")
+        check_prediction(self.prediction)
+        if self.min_snr_gamma is not None and not self.min_snr_gamma > 0:
+            raise ValueError(f"min_snr_gamma must be a positive number or None, got {self.min_snr_gamma}")
 
 
 @dataclass(frozen=True)

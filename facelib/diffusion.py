@@ -14,6 +14,7 @@ float64 (numpy) and owns every closed form:
 * ``p_sample``           x_{t-1} ~ p_theta(x_{t-1} | x_t) = N(mu_theta, sigma_t^2 I), sigma_t^2 = beta_t  (Eq. 5, §4)
 * ``sample``, ``run``    the reverse chain from x_T ~ N(0, I), or any part of it from a given x (``schedule``)
 * ``training_loss``      E ||eps - eps_theta(x_t, t)||^2                                           (Eq. 8)
+                         weighted per step (``loss_weights``): the loss of an x0 or v prediction target, min-SNR-gamma
 * ``respace``            the same model on a subset of the steps (fewer steps, no retraining)
 * ``eta``                DDIM (Song et al. 2021, Eq. 12) instead of the ancestral step: the same trained model,
                          x_{t-1} = sqrt(abar_{t-1}) x0_hat + sqrt(1 - abar_{t-1} - sigma_t^2) eps_theta + sigma_t z
@@ -32,6 +33,8 @@ import itertools
 import numpy as np
 import torch
 from tqdm import tqdm
+
+from .config import PREDICTIONS, check_prediction  # noqa: F401 (the prediction targets, re-exported)
 
 VARIANCES = ("beta", "posterior")
 
@@ -317,11 +320,34 @@ class GaussianDiffusion:
         return path if trajectory else path[-1]
 
     # ----------------------------------------------------------------------------- training
-    def training_loss(self, model, x0, t=None, generator=None, mask=None, eps=None, **model_inputs):
-        """The simple loss of Eq. 8: E_{t, x_0, eps} ||eps - eps_theta(x_t, t)||^2 (mean over valid entries).
+    def snr(self, t):
+        """The signal-to-noise ratio SNR_t = abar_t / (1 - abar_t) of x_t (float64 numpy, t >= 1)."""
+        t = np.asarray(t)
+        if t.size and t.min() < 1:
+            raise ValueError("the signal-to-noise ratio is defined for the noisy steps t >= 1")
+        return self.alphas_bar[t] / (1.0 - self.alphas_bar[t])
+
+    def loss_weights(self, t, prediction="eps", min_snr_gamma=None):
+        """The weight w_t of step t's eps-loss ||eps - eps_hat||^2 that makes it another objective (float64).
+
+        A network's x0 or v estimate is a fixed linear function of its eps estimate at step t, so each target's
+        loss is the eps-loss times a function of SNR_t:  ||x0 - x0_hat||^2 = ||eps - eps_hat||^2 / SNR_t and
+        ||v - v_hat||^2 = (1 + 1 / SNR_t) ||eps - eps_hat||^2.  Min-SNR-gamma (Hang et al. 2023) weighs the x0-loss
+        by min(SNR_t, gamma), i.e. the eps-loss by min(SNR_t, gamma) / SNR_t, whatever the target (``prediction``
+        then only changes what the network outputs, not the loss)."""
+        check_prediction(prediction)
+        snr = self.snr(t)
+        if min_snr_gamma is not None:
+            return np.minimum(snr, min_snr_gamma) / snr
+        return {"eps": np.ones_like(snr), "x0": 1.0 / snr, "v": 1.0 + 1.0 / snr}[prediction]
+
+    def training_loss(self, model, x0, t=None, generator=None, mask=None, eps=None, prediction="eps",
+                      min_snr_gamma=None, **model_inputs):
+        """The simple loss of Eq. 8, E_{t, x_0, eps} ||eps - eps_theta(x_t, t)||^2 (mean over valid entries),
+        or with ``prediction`` "x0" / "v" or ``min_snr_gamma`` that objective (:meth:`loss_weights`).
 
         t (B,) and eps (like x0) are drawn from ``generator`` unless given; ``model_inputs`` (a conditional
-        denoiser's ``labels``) go to the model."""
+        denoiser's ``labels``) go to the model, which returns its noise estimate whatever it predicts."""
         if t is None:
             t = torch.randint(1, self.num_steps + 1, (x0.shape[0],), generator=generator)
         if eps is None:
@@ -330,6 +356,9 @@ class GaussianDiffusion:
         pred = model(xt, torch.as_tensor(self.timesteps[t.cpu().numpy()], dtype=torch.float32).to(x0.device), mask,
                      **model_inputs)
         err = (eps - pred) ** 2
+        if prediction != "eps" or min_snr_gamma is not None:
+            weights = self.loss_weights(t.cpu().numpy(), prediction, min_snr_gamma)
+            err = err * torch.as_tensor(weights, dtype=err.dtype, device=err.device).reshape(-1, 1, 1, 1)
         if mask is None:
             return err.mean()
         m = mask[:, :, None, None].to(err.dtype)

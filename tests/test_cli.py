@@ -2,6 +2,7 @@
 import dataclasses
 import functools
 import json
+import re
 
 import numpy as np
 import pytest
@@ -116,6 +117,24 @@ def test_cli_train_writes_a_loadable_checkpoint(tmp_path, capsys):
     assert "wrote" in capsys.readouterr().out
     with pytest.raises(SystemExit):
         main(["train", "classifier"])
+
+
+def test_cli_train_reaches_every_setting_with_set(tmp_path, capsys):
+    stem = tmp_path / "v"
+    assert main(["train", "denoiser", "--steps", "2", "--out", str(stem), "--set", "prediction=v", "--set",
+                 "min_snr_gamma=5", "--set", "mirror=0.5", "--set", "ema_decay=none", "--set",
+                 "anatomy_pool=('coma',)"]) == 0
+    training_record = tasks.load_denoiser(stem).meta["training"]
+    assert (training_record["prediction"], training_record["min_snr_gamma"], training_record["mirror"],
+            training_record["ema_decay"], training_record["anatomy_pool"]) == ("v", 5, 0.5, None, ["coma"])
+    for bad, message in ((["--set", "predicton=v"], "NAME a setting of denoiser .*prediction"),
+                         (["--set", "mirror=often"], "mirror: must be float, got 'often'"),
+                         (["--set", "prediction=score"], "unknown prediction target 'score'; allowed: eps, x0, v"),
+                         (["--set", "steps=4"], "repeats a setting"),
+                         (["--set", "conditional=maybe"], "true or false")):
+        with pytest.raises(SystemExit):
+            main(["train", "denoiser", "--steps", "2", "--out", str(stem), *bad])
+        assert re.search(message, capsys.readouterr().err)
 
 
 def test_cli_data_prints_a_summary(capsys):

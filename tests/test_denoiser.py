@@ -98,3 +98,21 @@ def test_classifier_free_guidance_mixes_the_conditional_and_free_estimates():
         ClassifierFree(Denoiser(DenoiserConfig(width=32, depth=1, heads=2, ff=64)), y, 2.0)
     with pytest.raises(ValueError, match="scale must be a number >= 0"):
         ClassifierFree(model, y, -1.0)
+
+
+def test_every_prediction_target_returns_the_noise_estimate_and_starts_from_the_gaussian_one():
+    """x0 and v networks convert their output to eps (forward); with the zeroed output layer all three are the
+    Gaussian estimate, and to_eps inverts from_eps."""
+    torch.manual_seed(0)
+    x, t = torch.randn(3, 10, 68, 3), torch.tensor([3.0, 700.0, 1990.0])
+    with torch.no_grad():
+        estimates = {p: Denoiser(DenoiserConfig(**{**SMALL.__dict__, "prediction": p})).eval()(x, t)
+                     for p in ("eps", "x0", "v")}
+        torch.testing.assert_close(estimates["x0"], estimates["eps"], rtol=1e-4, atol=1e-4)
+        torch.testing.assert_close(estimates["v"], estimates["eps"], rtol=1e-4, atol=1e-4)
+        for p in ("x0", "v"):
+            m = Denoiser(DenoiserConfig(**{**SMALL.__dict__, "prediction": p}))
+            eps = torch.randn_like(x)
+            torch.testing.assert_close(m.to_eps(x, t, m.from_eps(x, t, eps)), eps, rtol=1e-4, atol=1e-4)
+    with pytest.raises(ValueError, match="unknown prediction target 'score'; allowed: eps, x0, v"):
+        Denoiser(DenoiserConfig(prediction="score"))

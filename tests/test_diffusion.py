@@ -274,3 +274,59 @@ def test_ddim_inversion_recovers_the_sequence_and_eta_outside_0_1_is_an_error():
     for bad in (-0.1, 1.5, True, "0"):
         with pytest.raises(ValueError, match="eta must be None"):
             GaussianDiffusion(linear_betas(10), eta=bad)
+
+
+@pytest.mark.parametrize("prediction", ["eps", "x0", "v"])
+def test_loss_weights_turn_the_eps_loss_into_each_targets_own_loss(prediction):
+    """||x0 - x0_hat||^2 and ||v - v_hat||^2 of the x0 and v implied by an eps estimate are the eps-loss times
+    loss_weights(t); min-SNR-gamma is one weighting whatever the target: min(SNR, gamma) / SNR on the eps-loss."""
+    d = GaussianDiffusion(linear_betas(2000))
+    gen = torch.Generator().manual_seed(0)
+    x0, eps = torch.randn(6, 5, 68, 3, generator=gen), torch.randn(6, 5, 68, 3, generator=gen)
+    t = torch.tensor([1, 10, 200, 900, 1500, 2000])
+    eps_hat = eps + 0.3 * torch.randn(eps.shape, generator=gen)
+    abar = torch.as_tensor(d.alphas_bar[t]).reshape(-1, 1, 1, 1)
+    xt = abar.sqrt() * x0 + (1 - abar).sqrt() * eps
+    x0_hat = d.predict_x0(xt, t, eps_hat)
+    own = {"eps": (eps, eps_hat), "x0": (x0, x0_hat),
+           "v": (abar.sqrt() * eps - (1 - abar).sqrt() * x0, abar.sqrt() * eps_hat - (1 - abar).sqrt() * x0_hat)}
+    target, estimate = own[prediction]
+    per_step = lambda a, b: ((a - b) ** 2).mean((1, 2, 3))  # noqa: E731
+    torch.testing.assert_close(per_step(target, estimate),
+                               torch.as_tensor(d.loss_weights(t.numpy(), prediction)) * per_step(eps, eps_hat))
+    snr = d.alphas_bar[t] / (1 - d.alphas_bar[t])
+    np.testing.assert_allclose(d.loss_weights(t.numpy(), prediction, min_snr_gamma=5.0), np.minimum(snr, 5) / snr)
+    model = lambda x, time, mask: eps_hat  # noqa: E731
+    loss = d.training_loss(model, x0, t=t, eps=eps, prediction=prediction)
+    torch.testing.assert_close(loss, per_step(target, estimate).mean())
+
+
+def test_v_and_x0_targets_match_the_diffusers_ddpm_scheduler():
+    """The independent oracle: diffusers' velocity (get_velocity) is our v, and its DDPM step given a network's
+    v or x0 output ("v_prediction", "sample") is our step given the eps that models.denoiser converts it to.
+    Diffusers' timestep k is our paper step k + 1 (its timesteps are 0-based)."""
+    import diffusers  # requirements-test.txt
+    from facelib.models.denoiser import Denoiser, DenoiserConfig
+    d = GaussianDiffusion(linear_betas(2000), variance="posterior")
+    gen = torch.Generator().manual_seed(1)
+    x0, eps = torch.randn(2, 4, 68, 3, generator=gen), torch.randn(2, 4, 68, 3, generator=gen)
+    for prediction, kind in (("v", "v_prediction"), ("x0", "sample")):
+        scheduler = diffusers.DDPMScheduler(num_train_timesteps=2000, beta_start=1e-4, beta_end=0.02,
+                                            beta_schedule="linear", clip_sample=False, prediction_type=kind,
+                                            variance_type="fixed_small")
+        net = Denoiser(DenoiserConfig(width=16, depth=1, heads=2, ff=32, prediction=prediction)).double()
+        for k in (5, 700, 1999):
+            t = k + 1
+            xt = d.q_sample(x0, torch.tensor([t, t]), eps)
+            if prediction == "v":
+                torch.testing.assert_close(scheduler.get_velocity(x0, eps, torch.tensor([k, k])),
+                                           net.from_eps(xt, torch.tensor([t, t]), eps), rtol=1e-5, atol=1e-5)
+            output = torch.randn(xt.shape, generator=gen)  # a network's raw output, read as its target
+            z = torch.randn(xt.shape, generator=torch.Generator().manual_seed(k), dtype=xt.dtype)  # diffusers' draw
+            eps_hat = net.to_eps(xt, torch.full((2,), float(t)), output)
+            ours = d.mean_variance_from_eps(xt, t, eps_hat)
+            theirs = scheduler.step(output, k, xt, generator=torch.Generator().manual_seed(k))
+            # diffusers' abar (and the network's) is float32: agreement to 1e-4, where a wrong formula errs by O(1)
+            torch.testing.assert_close(ours["x0"], theirs.pred_original_sample, rtol=1e-4, atol=1e-4)
+            torch.testing.assert_close(ours["mean"] + ours["variance"].sqrt() * z, theirs.prev_sample, rtol=1e-4,
+                                       atol=1e-4)

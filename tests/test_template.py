@@ -60,3 +60,15 @@ def test_vertex_normals_are_unit():
     t = tpl.get_template()
     n = vertex_normals(t.vertices, t.faces)
     np.testing.assert_allclose(np.linalg.norm(n, axis=1), 1.0, atol=1e-9)
+
+
+def test_the_landmark_mirror_is_an_involution_that_maps_the_template_onto_its_mirror_image():
+    """iBUG-68's left-right pairs (jaw 0 <-> 16, eye corners 36 <-> 45, mouth corners 48 <-> 54, the midline
+    fixed): the template, symmetric about x = 0, mirrored (x -> -x) has landmark mirror[i] where it had i."""
+    t = tpl.get_template()
+    m = t.landmark_mirror
+    assert sorted(m) == list(range(68)) and (m[m] == np.arange(68)).all()
+    assert (m[[0, 36, 48, 60, 17]] == [16, 45, 54, 64, 26]).all()
+    assert (m[[8, 27, 30, 33, 51, 57, 62, 66]] == [8, 27, 30, 33, 51, 57, 62, 66]).all()
+    landmarks = t.vertices[t.landmark_index]
+    np.testing.assert_allclose(landmarks[m] * [-1, 1, 1], landmarks, atol=1e-6)

@@ -287,3 +287,49 @@ def test_a_conditional_denoiser_trains_with_label_dropout_and_is_named_cfg():
     assert model.label_embedding.num_embeddings == 13 and np.isfinite(history["loss"]).all()
     with pytest.raises(ValueError, match="condition_dropout is a probability"):
         config.DenoiserTraining(conditional=True, condition_dropout=1.0)
+
+
+def test_mirroring_swaps_left_and_right_keeps_each_regions_motion_and_draws_nothing_when_off(coma_train):
+    from facelib import data, metrics
+    from facelib.training.recipes import mirror_faces
+    normalizer = data.LandmarkNormalizer.fit(coma_train)
+    x = torch.as_tensor(normalizer.normalize(coma_train.landmarks[:6]))
+    gen = torch.Generator().manual_seed(0)
+    before = gen.get_state()
+    assert mirror_faces(x, normalizer, 0.0, Draws(gen, 6)) is x
+    assert torch.equal(gen.get_state(), before)  # a run without mirroring keeps its draws
+    once = mirror_faces(x, normalizer, 1.0, Draws(gen, 6))
+    torch.testing.assert_close(mirror_faces(once, normalizer, 1.0, Draws(gen, 6)), x, atol=1e-4, rtol=1e-4)
+    mm, mirrored = coma_train.landmarks[:6], normalizer.denormalize(once).numpy()
+    np.testing.assert_allclose(mirrored[:, :, 48, 0], -mm[:, :, 54, 0], atol=1e-3)  # the corners swap sides
+    for region, amplitude in metrics.amplitudes(mirrored).items():
+        np.testing.assert_allclose(amplitude, metrics.amplitudes(mm)[region], atol=1e-3)
+    half = mirror_faces(x.repeat(50, 1, 1, 1), normalizer, 0.5, Draws(gen, 300))
+    share = (half - x.repeat(50, 1, 1, 1)).abs().amax((1, 2, 3)).gt(1e-3).float().mean().item()
+    assert 0.4 < share < 0.6
+
+
+def test_the_denoiser_logs_held_out_losses_per_noise_level_with_fixed_draws():
+    r = _recipe(steps=4)
+    model, history = training.fit(r, progress=False, validate_every=2)
+    held_out = history["held_out"]
+    assert held_out["step"] == [2, 4]
+    assert set(held_out) == {"step", "t 1-500", "t 501-1000", "t 1001-1500", "t 1501-2000"}
+    assert r.validate(model) == {k: v[-1] for k, v in held_out.items() if k != "step"}  # the same draws
+    assert held_out["t 1-500"][-1] > held_out["t 1501-2000"][-1] > 0  # at low noise eps is hard to tell
+
+
+@pytest.mark.parametrize("prediction", ["x0", "v"])
+def test_a_denoiser_with_another_target_or_weighting_trains_and_samples_by_its_recorded_config(prediction, tmp_path):
+    from facelib import tasks
+    r = _recipe(steps=3, prediction=prediction, min_snr_gamma=5.0, mirror=0.5)
+    assert r.build(torch.Generator()).config.prediction == prediction
+    pt, js = training.train_and_save(r, name=str(tmp_path / "d"), progress=False)
+    denoiser = tasks.load_denoiser(str(tmp_path / "d"))
+    assert denoiser.model.config.prediction == prediction
+    assert tasks.unconditional(2, steps=3, denoiser=denoiser, progress=False).shape == (2, 40, 68, 3)
+    meta = json.loads(js.read_text())
+    meta["training"]["schedule"] = "cosine"  # a record that the network does not match is refused
+    js.write_text(json.dumps(meta))
+    with pytest.raises(ValueError, match="differs from its network's .* cannot be sampled correctly"):
+        tasks.load_denoiser(str(tmp_path / "d"))

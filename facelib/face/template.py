@@ -214,6 +214,7 @@ class Template:
     faces: np.ndarray  # (K, 3)
     colors: np.ndarray  # (V, 3) RGB albedo
     landmark_index: np.ndarray  # (68,) vertex indices, iBUG-68 order
+    landmark_mirror: np.ndarray  # (68,) the landmark each one becomes in the left-right mirror image
     levels: tuple  # Level per resolution, level 0 = full mesh
     mouth_band: np.ndarray  # (MOUTH_BAND, C) vertex indices of the mouth interior rows
 
@@ -315,6 +316,13 @@ def _landmarks(canonical):
     return np.array(idx, dtype=np.int64)
 
 
+def _landmark_mirror(landmark_index):
+    """For each landmark i, the landmark j at the mirror vertex of i's (x0 -> -x0): a face mirrored left to
+    right, x -> -x, has landmark j where the face had landmark i (iBUG-68: 0 <-> 16, 36 <-> 45, 48 <-> 54, ...)."""
+    where = {int(v): j for j, v in enumerate(landmark_index)}
+    return np.array([where[_mirror(int(v))] for v in landmark_index], dtype=np.int64)
+
+
 def _levels():
     levels = []
     rows, cols = np.arange(N_ROWS), np.arange(N_COLS)
@@ -382,10 +390,10 @@ def get_template():
         colors[band[k][inside]] = c
     colors[band[:, ~inside].ravel()] = SKIN
     tpl = Template(canonical=canonical, vertices=vertices, faces=grid_faces(N_ROWS, N_COLS),
-                   colors=colors, landmark_index=_landmarks(canonical), levels=_levels(),
-                   mouth_band=band)
+                   colors=colors, landmark_index=(index := _landmarks(canonical)),
+                   landmark_mirror=_landmark_mirror(index), levels=_levels(), mouth_band=band)
     place_mouth_band(tpl.vertices, tpl)
-    for arr in (canonical, vertices, colors, tpl.landmark_index, band):
+    for arr in (canonical, vertices, colors, tpl.landmark_index, tpl.landmark_mirror, band):
         arr.setflags(write=False)
     return tpl
 

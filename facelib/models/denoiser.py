@@ -16,6 +16,12 @@ of the training frames,
 
 and the transformer learns only the residual: eps_theta = eps_gauss + BiT(TE + PE + FE).  Its
 output layer starts at zero, so training starts from the best linear per-frame denoiser.
+
+What the network outputs (``prediction``, an ablation of the denoiser chapter): the noise eps (the paper's),
+the clean sequence x_0 (MDM) or the velocity v = sqrt(abar_t) eps - sqrt(1 - abar_t) x_0 (Salimans & Ho 2022).
+The residual is added to the Gaussian estimate written as that target, and :meth:`Denoiser.forward` always
+returns the noise estimate it implies (eps = (x_t - sqrt(abar_t) x_0) / sqrt(1 - abar_t) = sqrt(1 - abar_t) x_t +
+sqrt(abar_t) v), so every sampler and guidance of the book runs any of them unchanged.
 """
 from __future__ import annotations
 
@@ -24,7 +30,7 @@ from dataclasses import asdict, dataclass
 import torch
 from torch import nn
 
-from ..diffusion import named_betas
+from ..diffusion import check_prediction, named_betas
 from .bit import BiT, check_sequence_input
 
 
@@ -41,6 +47,7 @@ class DenoiserConfig:
     gaussian_skip: bool = True  # our addition (see the module docstring)
     num_diffusion_steps: int = 2000  # the schedule the skip needs (paper §4)
     schedule: str = "linear"
+    prediction: str = "eps"  # what the network outputs: "eps" (paper), "x0" (MDM) or "v"; forward returns eps
     num_classes: int = 0  # > 0: label-conditional (classifier-free guidance), a label token before the frames
 
 
@@ -49,6 +56,7 @@ class Denoiser(BiT):
 
     def __init__(self, config=DenoiserConfig()):
         c = config
+        check_prediction(c.prediction)
         super().__init__(c.num_landmarks, c.width, c.depth, c.heads, c.ff, c.dropout)
         self.config = config
         features = c.num_landmarks * 3
@@ -72,10 +80,32 @@ class Denoiser(BiT):
         self.prior_basis.copy_(basis.float())
         self.prior_variances.copy_(variances.clamp_min(0).float())
 
+    def _abar(self, t, xt):
+        """abar_t for time labels t (B,), shaped (B, 1, 1, 1) on x_t's device."""
+        return self.alphas_bar[t.round().long().clamp(0, len(self.alphas_bar) - 1)].to(xt.device).reshape(-1, 1, 1, 1)
+
+    def to_eps(self, xt, t, output):
+        """The noise estimate that the network's ``output`` (eps, x_0 or v: ``config.prediction``) implies."""
+        abar = self._abar(t, xt)
+        if self.config.prediction == "x0":
+            return (xt - abar.sqrt() * output) / (1 - abar).sqrt()
+        if self.config.prediction == "v":
+            return (1 - abar).sqrt() * xt + abar.sqrt() * output
+        return output
+
+    def from_eps(self, xt, t, eps):
+        """A noise estimate written as the network's target (the inverse of :meth:`to_eps`)."""
+        abar = self._abar(t, xt)
+        x0 = (xt - (1 - abar).sqrt() * eps) / abar.sqrt()
+        if self.config.prediction == "x0":
+            return x0
+        if self.config.prediction == "v":
+            return abar.sqrt() * eps - (1 - abar).sqrt() * x0
+        return eps
+
     def gaussian_eps(self, xt, t):
         """E[eps | x_t] if every frame were drawn from N(0, Sigma): a per-frame linear filter."""
-        abar = self.alphas_bar[t.round().long().clamp(0, len(self.alphas_bar) - 1)].to(xt.device)
-        abar = abar.reshape(-1, 1, 1)
+        abar = self._abar(t, xt)[..., 0]
         y = xt.reshape(xt.shape[0], xt.shape[1], -1) @ self.prior_basis
         y = y * (1 - abar).sqrt() / (abar * self.prior_variances + 1 - abar)
         return (y @ self.prior_basis.T).reshape(xt.shape)
@@ -98,8 +128,10 @@ class Denoiser(BiT):
                 if labels.shape != (len(xt),) or labels.min() < 0 or labels.max() > k:
                     raise ValueError(f"labels must be ({len(xt)},) class indices in 0..{k} ({k}: no label)")
             tokens = self.encode(xt, t, mask, prefix=self.label_embedding(labels.to(xt.device))[:, None])[:, 1:]
-        eps = self.out(tokens).reshape(xt.shape)
-        return eps + self.gaussian_eps(xt, t.to(xt.device)) if self.config.gaussian_skip else eps
+        output = self.out(tokens).reshape(xt.shape)  # the network's estimate of its target (config.prediction)
+        if self.config.gaussian_skip:
+            output = output + self.from_eps(xt, t, self.gaussian_eps(xt, t.to(xt.device)))
+        return self.to_eps(xt, t, output)
 
     def config_dict(self):
         return asdict(self.config)

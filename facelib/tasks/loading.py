@@ -68,7 +68,13 @@ class TrainedDenoiser:
 def load_denoiser(name="denoiser_coma", variance="beta"):
     """Load a shipped (or retrained) denoiser checkpoint from data/checkpoints (sha256 checked)."""
     model, meta = load_checkpoint(name, "denoiser", lambda c: Denoiser(DenoiserConfig(**c)))
-    training = meta["training"]
+    training, c = meta["training"], model.config
+    # the sampler runs the recorded schedule; the network converts its output (c.prediction) to eps on its own
+    recorded = (training["schedule"], training["num_diffusion_steps"], training.get("prediction", "eps"))
+    if recorded != (c.schedule, c.num_diffusion_steps, c.prediction):
+        raise ValueError(f"checkpoint {name}: its training (schedule, steps, prediction target) {recorded} differs "
+                         f"from its network's {(c.schedule, c.num_diffusion_steps, c.prediction)}: it cannot be "
+                         "sampled correctly; retrain it")
     diffusion = GaussianDiffusion(named_betas(training["schedule"], training["num_diffusion_steps"]), variance)
     return TrainedDenoiser(model, LandmarkNormalizer.from_dict(meta["normalizer"]), diffusion, {**meta, "name": name})
 

@@ -214,10 +214,13 @@ def _state_path(resume_from):
     return Path(resume_from).with_suffix(".state.pt")
 
 
-def fit(recipe, progress=True, log_every=50, device=None, resume_from=None, save_every=500):
+def fit(recipe, progress=True, log_every=50, device=None, resume_from=None, save_every=500, validate_every=500):
     """Train ``recipe``'s model with its settings; returns (model, history) on every process.
 
-    The model returned is the EMA of the weights when the settings keep one.  ``resume_from``: a path
+    The model returned is the EMA of the weights when the settings keep one.  A recipe with a
+    ``validate(model) -> {name: value}`` method (the denoiser's held-out losses per noise level) has it called on
+    the model that would be returned every ``validate_every`` steps and at the last; the values go to
+    ``history["held_out"]`` ({"step": [...], name: [...]}).  ``resume_from``: a path
     stem; every ``save_every`` steps and at the last step rank 0 writes the training state to
     ``<stem>.state.pt`` (atomically: a temporary file in the same folder, then renamed, so that a kill
     mid-write leaves the previous state intact).  The state holds the step; the weights and buffers of
@@ -233,13 +236,13 @@ def fit(recipe, progress=True, log_every=50, device=None, resume_from=None, save
     dist = start_distributed(device)
     owns_group = owns_group and torch.distributed.is_initialized()
     try:
-        return _fit(recipe, dist, progress, log_every, resume_from, save_every)
+        return _fit(recipe, dist, progress, log_every, resume_from, save_every, validate_every)
     finally:
         if owns_group:
             torch.distributed.destroy_process_group()
 
 
-def _fit(recipe, dist, progress, log_every, resume_from, save_every):
+def _fit(recipe, dist, progress, log_every, resume_from, save_every, validate_every):
     settings = recipe.settings
     torch.manual_seed(settings.seed)
     generator = torch.Generator().manual_seed(settings.seed)
@@ -290,6 +293,11 @@ def _fit(recipe, dist, progress, log_every, resume_from, save_every):
                 for pe, pm in zip(ema.parameters(), model.parameters()):
                     pe.lerp_(pm, 1 - decay)
         log.add(step, **_mean_over_processes(values, dist))
+        if hasattr(recipe, "validate") and ((step + 1) % validate_every == 0 or step + 1 == total):
+            held_out = log.history.setdefault("held_out", {"step": []})
+            held_out["step"].append(step + 1)
+            for name, value in recipe.validate(ema if ema is not None else model).items():
+                held_out.setdefault(name, []).append(value)
         if resume_from is not None and ((step + 1) % save_every == 0 or step + 1 == total):
             random_states = _random_states(dist)  # a collective: every process takes part
             if dist.is_main:

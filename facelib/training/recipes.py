@@ -16,6 +16,7 @@ import torch
 from torch import nn
 
 from .. import config, data, deformation, srvf
+from ..face import get_template
 from ..checkpoints import checkpoint_name
 from ..diffusion import GaussianDiffusion, named_betas
 from ..inpainting import FILL_SETTINGS, fill_masks
@@ -78,8 +79,28 @@ def swap_anatomy(x, own, pool, swap, draws):
     return x + shift[:, None]
 
 
+def mirror_faces(x, normalizer, probability, draws):
+    """Left-right mirroring (our option): each normalised sequence of x (B, F, 68, 3) is, with ``probability``,
+    replaced by its mirror image (x -> -x in mm, the landmarks renamed by the template's mirror, iBUG-68
+    0 <-> 16, 36 <-> 45, 48 <-> 54, ...).  The world's faces are symmetric up to a mild identity asymmetry, and
+    its one-sided labels (mouth_side, a one-sided smile) go either way, so a mirrored sequence is a plausible one
+    of the same label.  No draw is made at probability 0 (the draws of a run without mirroring are unchanged)."""
+    if probability == 0:
+        return x
+    flip = draws.rand() < probability
+    order = torch.tensor(get_template().landmark_mirror, device=x.device)
+    sign = torch.tensor([-1.0, 1.0, 1.0], device=x.device, dtype=x.dtype)
+    mirrored = normalizer.normalize(normalizer.denormalize(x)[:, :, order] * sign)
+    return torch.where(flip[:, None, None, None], mirrored, x)
+
+
+HELD_OUT_BUCKETS = ((1, 500), (501, 1000), (1001, 1500), (1501, 2000))  # paper steps t, a quarter of T each
+HELD_OUT_SEQUENCES = 256  # at most this many test sequences: a held-out curve costs a few forward passes
+
+
 class DenoiserRecipe(Recipe):
-    """eps_theta trained with the simple loss of Eq. 8 on anatomy-augmented sequences."""
+    """eps_theta trained with the simple loss of Eq. 8 on anatomy-augmented sequences (or, by its settings,
+    another prediction target, min-SNR-gamma weighting, left-right mirroring)."""
 
     kind = "denoiser"
 
@@ -87,11 +108,12 @@ class DenoiserRecipe(Recipe):
         self.settings = settings
         train = data.load_dataset(settings.dataset, "train", num_frames=settings.num_frames)
         self.architecture = model_config or DenoiserConfig(num_diffusion_steps=settings.num_diffusion_steps,
-                                                             schedule=settings.schedule,
+                                                             schedule=settings.schedule, prediction=settings.prediction,
                                                              num_classes=len(train.label_names) * settings.conditional)
-        if (self.architecture.num_diffusion_steps, self.architecture.schedule) != (settings.num_diffusion_steps,
-                                                                                     settings.schedule):
-            raise ValueError("the denoiser's schedule must match the training schedule")
+        a = self.architecture
+        if (a.num_diffusion_steps, a.schedule, a.prediction) != (settings.num_diffusion_steps, settings.schedule,
+                                                                 settings.prediction):
+            raise ValueError("the denoiser's schedule and prediction target must match the training settings'")
         self.name = f"denoiser ({settings.dataset})"
         self.variable = not isinstance(settings.num_frames, int)
         self.labels, self.label_names = torch.as_tensor(train.labels), list(train.label_names)
@@ -106,6 +128,41 @@ class DenoiserRecipe(Recipe):
         self.pool = (torch.as_tensor(pool) / self.normalizer.scale).float()
         self.size = len(self.x_all)
         self.diffusion = GaussianDiffusion(named_betas(settings.schedule, settings.num_diffusion_steps))
+        self.held_out = self._held_out_batch(settings)
+
+    def _held_out_batch(self, settings):
+        """Fixed draws on the test split for :meth:`validate`: per bucket, each sequence at one step of the
+        bucket (scaled to T) with one noise draw, made once from seed 0 (every run sees the same)."""
+        test = data.load_dataset(settings.dataset, "test", num_frames=settings.num_frames)
+        g = torch.Generator().manual_seed(0)
+        keep = torch.randperm(len(test), generator=g)[:HELD_OUT_SEQUENCES].sort().values.numpy()
+        x0 = torch.as_tensor(self.normalizer.normalize(test.landmarks[keep]))
+        mask = torch.arange(x0.shape[1])[None, :] < torch.as_tensor(test.lengths[keep])[:, None]
+        x0 = x0 * mask[:, :, None, None]
+        scale = settings.num_diffusion_steps / config.NUM_DIFFUSION_STEPS
+        buckets = {}
+        for low, high in HELD_OUT_BUCKETS:
+            lo, hi = max(1, round(low * scale)), max(1, round(high * scale))
+            t = torch.randint(lo, hi + 1, (len(x0),), generator=g)
+            buckets[f"t {low}-{high}"] = (t, torch.randn(x0.shape, generator=g))
+        return x0, mask, buckets
+
+    @torch.no_grad()
+    def validate(self, model):
+        """Eq. 8's loss ||eps - eps_theta(x_t, t)||^2 on held-out (test) sequences per noise-level bucket, with the
+        same draws at every call: {"t 1-500": loss, ...}.  The eps-loss whatever the prediction target, so that
+        runs with different targets compare (the training loss of an x0 or v run is weighted otherwise)."""
+        x0, mask, buckets = self.held_out
+        was_training = model.training
+        model.eval()
+        losses = {}
+        for name, (t, eps) in buckets.items():
+            inputs = {"labels": None} if self.architecture.num_classes else {}
+            losses[name] = self.diffusion.training_loss(model, x0.to(self.device), t=t, eps=eps.to(self.device),
+                                                        mask=mask.to(self.device) if self.variable else None,
+                                                        **inputs).item()
+        model.train(was_training)
+        return losses
 
     def build(self, generator):
         model = Denoiser(self.architecture)
@@ -117,6 +174,7 @@ class DenoiserRecipe(Recipe):
     def loss(self, model, draws):
         idx = draws.examples(self.size)
         x0 = swap_anatomy(self.x_all[idx], self.own[idx], self.pool, self.settings.anatomy_swap, draws)
+        x0 = mirror_faces(x0, self.normalizer, self.settings.mirror, draws)
         x0 = x0 * self.mask_all[idx][:, :, None, None]
         t = draws.randint(1, self.settings.num_diffusion_steps + 1)
         inputs = {}
@@ -124,7 +182,9 @@ class DenoiserRecipe(Recipe):
             dropped = draws.rand() < self.settings.condition_dropout
             inputs["labels"] = torch.where(dropped, self.architecture.num_classes, self.labels[idx])
         loss = self.diffusion.training_loss(model, x0, t=t, eps=draws.randn(*x0.shape[1:]),
-                                            mask=self.mask_all[idx] if self.variable else None, **inputs)
+                                            mask=self.mask_all[idx] if self.variable else None,
+                                            prediction=self.settings.prediction,
+                                            min_snr_gamma=self.settings.min_snr_gamma, **inputs)
         return loss, {"loss": loss.item()}
 
     def metadata(self, model):
