@@ -31,7 +31,7 @@ from facelib.checkpoints import checkpoint_paths
 
 # name -> (what it changes, DenoiserTraining settings, DenoiserConfig changes)
 VARIANTS = {
-    "baseline": ("the shipped recipe (eps, linear, uniform weighting, 128 x 4, EMA 0.999)", {}, {}),
+    "baseline": ("none: the recipe (eps, linear, uniform weighting, 128 x 4, EMA 0.999)", {}, {}),
     "x0": ("predict x_0 (MDM)", {"prediction": "x0"}, {}),
     "v": ("predict v (Salimans & Ho 2022)", {"prediction": "v"}, {}),
     "min_snr": ("min-SNR-5 weighting (Hang et al. 2023)", {"min_snr_gamma": 5.0}, {}),
@@ -40,7 +40,7 @@ VARIANTS = {
     "mirror": ("left-right mirroring, p = 0.5", {"mirror": 0.5}, {}),
     "wide": ("width 192, feed-forward 384", {}, {"width": 192, "ff": 384}),
     "deep": ("depth 6", {}, {"depth": 6}),
-    "x4": ("4x the steps (the length of the checkpoint shipped before issue 43)", {"steps_factor": 4}, {}),
+    "x4": ("4x the steps", {"steps_factor": 4}, {}),
     "x8": ("8x the steps", {"steps_factor": 8}, {}),
 }
 REGIONS = metrics.AMPLITUDE_REGIONS
@@ -138,8 +138,8 @@ def main():
                           checkpoints=[f"ic_{args.dataset}_I"], seeds=[0], n=n, steps=[args.sample_steps],
                           wall_time_s=time.perf_counter() - t_start)
         path = results.save_result(
-            args.save, f"Denoiser ablations at {args.steps} training steps ({args.dataset}): coverage of "
-            f"unconditional samples", COLUMNS, rows, run,
+            args.save, f"Denoiser ablations ({args.dataset}): coverage of unconditional samples, "
+            f"{args.steps} training steps a row (x4, x8: 4 and 8 times)", COLUMNS, rows, run,
             notes=f"each row: the shipped recipe with one change, {args.steps} steps (x4, x8: 4 and 8 times as many), "
                   "batch 64, seed 0; "
                   f"{n} samples at {args.sample_steps} respaced steps, seed 0; coverage as in coverage_unconditional "
