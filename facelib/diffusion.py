@@ -34,7 +34,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from .config import PREDICTIONS, check_prediction  # noqa: F401 (the prediction targets, re-exported)
+from .config import check_prediction
 
 VARIANCES = ("beta", "posterior")
 
