@@ -24,10 +24,10 @@ import shutil
 import time
 
 import numpy as np
-import torch
 
 from facelib import config, data, evaluation, metrics, results, tasks, training
 from facelib.checkpoints import checkpoint_paths
+from facelib.models.denoiser import DenoiserConfig
 
 # name -> (what it changes, DenoiserTraining settings, DenoiserConfig changes)
 VARIANTS = {
@@ -62,7 +62,6 @@ def recipe_for(name, dataset, steps):
     chosen = training.settings_for("denoiser", dataset=dataset, steps=steps, **settings)
     model_config = None
     if architecture:
-        from facelib.models.denoiser import DenoiserConfig
         model_config = DenoiserConfig(num_diffusion_steps=chosen.num_diffusion_steps, schedule=chosen.schedule,
                                       prediction=chosen.prediction, **architecture)
     return training.DenoiserRecipe(chosen, model_config)
@@ -164,5 +163,4 @@ def _row(name, change, steps, measured, scores, training_seconds, sampling_secon
 
 
 if __name__ == "__main__":
-    torch.set_num_threads(torch.get_num_threads())
     main()

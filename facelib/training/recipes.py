@@ -156,11 +156,9 @@ class DenoiserRecipe(Recipe):
         was_training = model.training
         model.eval()
         losses = {}
-        for name, (t, eps) in buckets.items():
-            inputs = {"labels": None} if self.architecture.num_classes else {}
+        for name, (t, eps) in buckets.items():  # a conditional denoiser sees no label (its free estimate)
             losses[name] = self.diffusion.training_loss(model, x0.to(self.device), t=t, eps=eps.to(self.device),
-                                                        mask=mask.to(self.device) if self.variable else None,
-                                                        **inputs).item()
+                                                        mask=mask.to(self.device) if self.variable else None).item()
         model.train(was_training)
         return losses
 
