@@ -85,3 +85,78 @@ def test_notebook_code_fits_the_page_column():
                 continue
             for line in "".join(cell["source"]).split("\n"):
                 assert len(line) <= 88, f"{nb.name}, cell {cell.get('id')}: {len(line)} characters: {line}"
+
+
+PAGES = sorted((ROOT / "book").glob("*.ipynb")) + [ROOT / "book" / "intro.md", ROOT / "book" / "errata.md"]
+INLINE = re.compile(r"\{[a-z:]+\}`[^`]*`|`[^`]*`|\$\$.*?\$\$|\$[^$\n]*\$", re.S)
+PLAIN_REFERENCE = re.compile(r"\b(?:[Cc]hapters? \d\d|[Aa]ppendix A1|[Ss]ections? \d+(?! of the paper))\b")
+REF_ROLE = re.compile(r"\{ref\}`([^`<]*?)\s*<([^>]+)>`")
+LABEL = re.compile(r"^\((ch\d\d|a1)(?:-s(\d+))?\)=\n(#+) (?:(\w+) · )?", re.M)
+
+
+def page_texts(path):
+    """The markdown of a book page (every markdown cell of a notebook)."""
+    if path.suffix == ".md":
+        return [path.read_text()]
+    return ["".join(c["source"]) for c in json.loads(path.read_text())["cells"] if c["cell_type"] == "markdown"]
+
+
+def prose(text):
+    """A page's text without code blocks (a ``` fence that opens a directive, e.g. an admonition, keeps its
+    text), roles, inline code and math."""
+    kept, stack = [], []
+    for line in text.split("\n"):
+        fence = re.match(r"\s*```(.*)", line)
+        if fence:
+            info = fence.group(1).strip()
+            if info or not stack:  # an opening fence: a directive ({name}) keeps its text, code does not
+                stack.append("text" if info.startswith("{") else "code")
+            else:
+                stack.pop()
+            continue
+        if "code" not in stack:
+            kept.append(line)
+    return INLINE.sub(" ", " ".join(kept))
+
+
+def plain_references(text):
+    """Chapter, section and appendix numbers written as plain text (outside code, math and roles)."""
+    return PLAIN_REFERENCE.findall(prose(text))
+
+
+def test_plain_reference_pattern():
+    assert plain_references("see chapter 04, section 3 and sections 5 and 6") == ["chapter 04", "section 3",
+                                                                                   "sections 5"]
+    assert plain_references("{ref}`chapter 04 <ch04>`, `section 3`, Section 4 of the paper, $section 2$") == []
+    assert plain_references("```bash\npython x.py  # section 2\n```\n```{admonition} A\nsee section 3\n```") == [
+        "section 3"]
+
+
+def test_every_chapter_and_section_reference_is_a_link_to_the_right_label():
+    """Every "chapter NN" or "section M" in the prose is a {ref} link (a build with -W fails on an unknown
+    label); a link's text names the chapter and section its label stands on; every chapter title and numbered
+    section carries its label (chNN, chNN-sM; a1 for the appendix)."""
+    labels = {}
+    for path in PAGES:
+        for text in page_texts(path):
+            for label, sec, hashes, num in LABEL.findall(text):
+                labels[f"{label}-s{sec}" if sec else label] = (label, sec)
+                on_heading = (hashes, num) == ("##", sec) if sec else (hashes, num.lower()) == ("#", label[-2:])
+                assert on_heading, \
+                    f"{path.name}: label {label}{'-s' + sec if sec else ''} is not on its heading"
+    for path in PAGES:
+        texts = page_texts(path)
+        for text in texts:
+            for heading in re.findall(r"^(# (?:\d\d|A1) · .*|## \d+ · .*)$", text, re.M):
+                assert re.search(r"\)=\n" + re.escape(heading), text), f"{path.name}: no label on {heading!r}"
+            found = plain_references(text)
+            assert not found, f"{path.name}: plain-text references {found}; write them as {{ref}} links"
+            for words, target in REF_ROLE.findall(text):
+                chapter, sec = labels.get(target, (None, None))
+                assert chapter, f"{path.name}: {{ref}} to an unknown label {target!r}"
+                named = re.search(r"(?:[Cc]hapter|[Aa]ppendix) (\d\d|A1)", words)
+                if named:
+                    assert chapter in (f"ch{named.group(1)}", named.group(1).lower()), f"{path.name}: {words!r} -> {target}"
+                number = re.search(r"(?:section )?(\d+)$", words)
+                if sec and number and not named or (named and sec):
+                    assert number and number.group(1) == sec, f"{path.name}: {words!r} links to {target}"
