@@ -1,6 +1,6 @@
 """Label control (Alg. 1): time and score guided sequences, sweep its settings, or run Table 1.
 
-Usage: python benchmarks/label_control.py [--experiment steps|sweep|table1] [--dataset coma [bu]]
+Usage: python benchmarks/label_control.py [--experiment steps|sweep|table1|per_label] [--dataset coma [bu]]
                                           [--n 64] [--steps 2000 200 100] [--lr 0.03] [--save NAME]
 steps (default): n sequences cycling through the dataset's labels, for each number of reverse
     steps (2000 = the paper's T; fewer = respaced): wall time, time per step, IC accuracy and FID
@@ -11,6 +11,9 @@ sweep: chapter 05's full sweep at one step count (default 200), n sequences per 
     weight lambda, the mean-shift scale and no guidance.
 table1: chapter 05's Table 1 on the whole test split (or its first --n sequences): GT, the two
     baselines, the unguided DDPM, mean shift (--mean-shift-scale) and Alg. 1, with intervals.
+per_label: the command line's label control (config.LabelControl: its steps, guidance and rate), n
+    sequences per label, against the test split's sequences of that label, both read by the IC: accuracy
+    per label with 95 % intervals (does guidance reach every label, the rare and subtle ones too?).
 --save NAME writes the table to results/NAME.json (facelib.results: provenance, checkpoint hashes).
 """
 import argparse
@@ -20,7 +23,7 @@ import time
 import numpy as np
 import torch
 
-from facelib import baselines, config, data, evaluation, experiments, results, tasks
+from facelib import baselines, config, data, evaluation, experiments, metrics, results, tasks
 
 SWEEP_LR = {"coma": [0.001, 0.003, 0.01, 0.03, 0.05, 0.1], "bu": [0.01, 0.03, 0.05, 0.1]}  # at 200 steps
 SWEEP_WEIGHTS = [0.0, 0.01, 1.0]
@@ -91,29 +94,56 @@ def table1_experiment(args, name, ev, guide, denoiser):
     return ["dataset", "model", "n"] + SCORE_COLUMNS + ["time (s)"], rows
 
 
+def per_label_experiment(args, name, ev, guide, denoiser):
+    settings = config.LabelControl(dataset=name)
+    test = data.load_dataset(name, "test")
+    test_targets = test.targets("I")
+    rows = []
+    for k, label in enumerate(ev.class_names):
+        t0 = time.perf_counter()
+        x = tasks.label_control(label, args.n, settings, denoiser=denoiser, guide=guide, progress=False, seed=k)
+        dt = time.perf_counter() - t0
+        cells = []
+        for seqs in (x, test.landmarks[test_targets == k]):
+            hits = 100.0 * (ev.features(seqs).argmax(1) == k)
+            low, high = metrics.bootstrap_interval(np.mean, hits, seed=0)
+            cells += [float(hits.mean()), [max(float(low), 0.0), min(float(high), 100.0)], len(seqs)]
+        rows.append([name, label, *cells, round(dt, 1)])
+        print(f"{label:>14}{cells[0]:>8.1f} [{cells[1][0]:5.1f}, {cells[1][1]:5.1f}]  test{cells[3]:>8.1f}"
+              f" ({cells[5]} seqs){dt:>8.1f} s", flush=True)
+    return ["dataset", "label", "Acc (%)", "95 % interval", "n", "test Acc (%)", "test 95 % interval", "test n",
+            "time (s)"], rows
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--experiment", choices=["steps", "sweep", "table1"], default="steps")
+    parser.add_argument("--experiment", choices=["steps", "sweep", "table1", "per_label"],
+                        default="steps")
     parser.add_argument("--dataset", nargs="+", default=["coma"])
     parser.add_argument("--n", type=int, default=None,
-                        help="sequences per row (steps: 64; sweep: 48; table1: the whole test split)")
+                        help="sequences per row (steps: 64; sweep: 48; table1: the whole test split; per_label: 32)")
     parser.add_argument("--steps", type=int, nargs="+", default=None,
-                        help="reverse steps (steps: 2000 500 200 100; sweep and table1: one value, 200)")
+                        help="reverse steps (steps: 2000 500 200 100; sweep and table1: one value, 200; "
+                             "per_label: the command line's, config.LabelControl)")
     parser.add_argument("--lr", type=float, default=None,
                         help="steps: one Adagrad rate for every row (default: tasks.adagrad_lr)")
     parser.add_argument("--mean-shift-scale", type=float, default=10.0, help="table1: the mean-shift row's scale")
     results.add_save_options(parser)
     args = parser.parse_args()
     results.check_save_args(args)  # before any compute
+    if args.experiment == "per_label" and args.steps is not None:
+        parser.error("--experiment per_label runs the command line's steps (config.LabelControl); drop --steps")
     if args.steps is None:
-        args.steps = [2000, 500, 200, 100] if args.experiment == "steps" else [200]
+        args.steps = {"steps": [2000, 500, 200, 100], "per_label": [config.LabelControl().steps]}.get(
+            args.experiment, [200])
     elif args.experiment != "steps" and len(args.steps) != 1:
         parser.error(f"--experiment {args.experiment} takes one --steps value, got {args.steps}")
     if args.n is None and args.experiment != "table1":
-        args.n = 64 if args.experiment == "steps" else 48
+        args.n = {"steps": 64, "per_label": 32}.get(args.experiment, 48)
     if args.n is not None and args.n < 2:
         parser.error(f"--n must be at least 2 (intervals are bootstrapped over the sequences), got {args.n}")
-    experiment = {"steps": steps_experiment, "sweep": sweep_experiment, "table1": table1_experiment}[args.experiment]
+    experiment = {"steps": steps_experiment, "sweep": sweep_experiment, "table1": table1_experiment,
+                  "per_label": per_label_experiment}[args.experiment]
     print(f"cores: {os.cpu_count()}, torch threads: {torch.get_num_threads()}, experiment: {args.experiment}, "
           f"n = {args.n}, steps {args.steps}; Adagrad lr {config.ADAGRAD_LR} at {config.LR_REFERENCE_STEPS} steps, "
           f"x sqrt({config.LR_REFERENCE_STEPS} / steps), lambda {config.GUIDANCE_WEIGHT}")
@@ -129,12 +159,14 @@ def main():
     if args.save:
         titles = {"steps": "Label control (Alg. 1) at several numbers of reverse steps",
                   "sweep": f"Label control: the settings of Alg. 1 and mean shift, {args.steps[0]} steps",
-                  "table1": f"Table 1 (label control), {args.steps[0]} reverse steps for the DDPM rows"}
+                  "table1": f"Table 1 (label control), {args.steps[0]} reverse steps for the DDPM rows",
+                  "per_label": f"Label control per label at the command line's settings ({args.steps[0]} steps)"}
         path = results.save_result(
             args.save, title=titles[args.experiment], columns=columns, rows=rows,
             run=results.Run(allow_dirty=args.allow_dirty, checkpoints=checkpoints, seeds=[0, 11],
                             n=args.n or max(len(data.load_dataset(d, "test")) for d in args.dataset),
-                            steps=args.steps, wall_time_s=time.perf_counter() - t0),
+                            steps=args.steps, wall_time_s=time.perf_counter() - t0,
+                            settings=(config.LabelControl(),) if args.experiment == "per_label" else ()),
             notes="intervals: 95 % bootstrap over the sequences (Evaluator.score); "
                   "table1: the rows of each dataset use n = its whole test split "
                   "(column n)")
