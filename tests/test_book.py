@@ -191,9 +191,6 @@ NOTATION_RULES = [
 ]
 NOTE = re.compile(r"(?:\bwrites?\b|\bpaper's|\btheir\b)[^$]{0,30}$")
 MATH = re.compile(r"\$\$.*?\$\$|\$[^$\n]*\$", re.S)
-# Uses in a chapter that was being edited elsewhere when the notation page was written (issue 44): drop an
-# entry once its chapter conforms.
-PENDING = {("04_evaluation.ipynb", r"$\lVert s\mu_1 - s\mu_2\rVert^2 = s^2 \lVert\mu_1-\mu_2\rVert^2$")}
 
 
 def notation_violations(text):
@@ -237,6 +234,5 @@ def test_notation_rules_catch_the_conflicts_the_notation_page_settles():
 def test_chapters_follow_the_notation_page():
     assert (ROOT / "book" / "notation.md").exists() and "book/notation" in (ROOT / "_toc.yml").read_text()
     for nb in sorted((ROOT / "book").glob("*.ipynb")):
-        found = [(rule, span) for text in page_texts(nb) for rule, span in notation_violations(text)
-                 if (nb.name, span) not in PENDING]
+        found = [(rule, span) for text in page_texts(nb) for rule, span in notation_violations(text)]
         assert not found, f"{nb.name} uses a symbol against book/notation.md: {found}"
