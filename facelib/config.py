@@ -149,41 +149,62 @@ class Optimisation:
 
 @dataclass(frozen=True)
 class DenoiserTraining(Optimisation):
-    """The DDPM denoiser eps_theta (§3.1, §4).  Paper §4: 200K iterations, lr 1e-4, batch 256.  A CPU
-    budget of about an hour on 2 cores allows about 1/30 of that compute: a smaller transformer
-    (models.denoiser.DenoiserConfig), fewer, smaller steps with a higher rate, and an EMA.  Issue 43
-    measured the recipe against coverage (results/denoiser_ablation.json): training length decides it."""
+    """The DDPM denoiser eps_theta (§3.1, §4).  Paper §4: 200K iterations, lr 1e-4,
+    batch 256.  A CPU budget of about an hour on 2 cores allows about 1/30 of that
+    compute: a smaller transformer (models.denoiser.DenoiserConfig), fewer, smaller
+    steps with a higher rate, and an EMA.  Issue 43 measured the recipe against coverage
+    (results/denoiser_ablation.json): training length decides it."""
 
-    steps: int = 24_000  # our choice: ~60 min on 2 cores (paper: 200K); coverage 0.43 at 12,000, 0.53 here
+    # our choice: ~60 min on 2 cores (paper: 200K); coverage 0.43 at 12,000, 0.53 here
+    steps: int = 24_000
     batch_size: int = 64  # our choice (paper: 256): CPU time per step
-    lr: float = 5e-4  # our choice (paper: 1e-4): 13x fewer, 4x smaller steps need a larger rate
+    # our choice (paper: 1e-4): 13x fewer, 4x smaller steps need a larger rate
+    lr: float = 5e-4
     warmup: int = 500  # our choice: linear warm-up, then cosine decay to lr / 20
     final_lr_fraction: float = 0.05
     grad_clip: float | None = 1.0  # our choice: stabilises the first steps
-    ema_decay: float | None = 0.999  # our choice: visibly cleaner samples for short runs
+    # our choice: visibly cleaner samples for short runs
+    ema_decay: float | None = 0.999
     dataset: str = "coma"  # paper §4: "unless otherwise specified, solely CoMA"
-    num_frames: object = NUM_FRAMES  # paper §4: 40 frames; (35, 45) for the variable-length model of App. A
+    # paper §4: 40 frames; (35, 45) for the variable-length model of App. A
+    num_frames: object = NUM_FRAMES
     num_diffusion_steps: int = NUM_DIFFUSION_STEPS  # paper §4: T = 2000
     schedule: str = "linear"  # paper §4: linear betas from 1e-4 to 0.02
-    prediction: str = "eps"  # paper, Eq. 8: the network predicts the noise ("x0": MDM's; "v": Salimans & Ho 2022)
-    min_snr_gamma: float | None = None  # paper: None (the simple loss); a number: min-SNR-gamma (Hang et al. 2023)
-    mirror: float = 0.0  # our option: probability that a training sequence is mirrored left to right
-    anatomy_pool: tuple = ("coma", "bu")  # our choice: training faces of these datasets (9 + 81)
-    anatomy_swap: float = 0.5  # our choice: probability that a sequence gets another anatomy
-    conditional: bool = False  # True: label-conditional, for classifier-free guidance (Ho & Salimans 2022)
-    condition_dropout: float = 0.1  # conditional only: the label is dropped (-> "no label") this often (MDM: 0.1)
+    # paper, Eq. 8: the network predicts the noise
+    # ("x0": MDM's; "v": Salimans & Ho 2022)
+    prediction: str = "eps"
+    # paper: None (the simple loss); a number: min-SNR-gamma (Hang et al. 2023)
+    min_snr_gamma: float | None = None
+    # our option: probability that a training sequence is mirrored left to right
+    mirror: float = 0.0
+    # our choice: training faces of these datasets (9 + 81)
+    anatomy_pool: tuple = ("coma", "bu")
+    # our choice: probability that a sequence gets another anatomy
+    anatomy_swap: float = 0.5
+    # True: label-conditional, for classifier-free guidance (Ho & Salimans 2022)
+    conditional: bool = False
+    # conditional only: the label is dropped (-> "no label") this often (MDM: 0.1)
+    condition_dropout: float = 0.1
 
     def __post_init__(self):
         super().__post_init__()
         if not 0 <= self.anatomy_swap <= 1:
-            raise ValueError(f"anatomy_swap is a probability in [0, 1], got {self.anatomy_swap}")
+            raise ValueError(
+                f"anatomy_swap is a probability in [0, 1], got {self.anatomy_swap}"
+            )
         if not 0 <= self.condition_dropout < 1:
-            raise ValueError(f"condition_dropout is a probability in [0, 1), got {self.condition_dropout}")
+            raise ValueError(
+                "condition_dropout is a probability in [0, 1), "
+                f"got {self.condition_dropout}"
+            )
         if not 0 <= self.mirror <= 1:
             raise ValueError(f"mirror is a probability in [0, 1], got {self.mirror}")
         check_prediction(self.prediction)
         if self.min_snr_gamma is not None and not self.min_snr_gamma > 0:
-            raise ValueError(f"min_snr_gamma must be a positive number or None, got {self.min_snr_gamma}")
+            raise ValueError(
+                "min_snr_gamma must be a positive number or None, "
+                f"got {self.min_snr_gamma}"
+            )
 
 
 @dataclass(frozen=True)

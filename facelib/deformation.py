@@ -178,18 +178,21 @@ def check_landmark_sequence(landmarks):
 
 
 def deform(neutral_vertices, landmark_sequence, model=None):
-    """Animate a neutral mesh (V, 3) of the template topology with a landmark sequence (F, 68, 3),
-    both in mm: Delta L_f = L_f - L with L the neutral mesh's own landmarks, M_f = M + Delta M_f.
-    The mouth-interior rows are then re-placed between the inner lips, as the face world builds
-    them (face/template.place_mouth_band): they are not skin the network should have to predict,
-    and outside the mouth they coincide, so any error between them would show as a crease.
-    Returns the meshes (F, V, 3) float32 in mm."""
+    """Animate a neutral mesh (V, 3) of the template topology with a landmark sequence
+    (F, 68, 3), both in mm: Delta L_f = L_f - L with L the neutral mesh's own landmarks,
+    M_f = M + Delta M_f.  The mouth-interior rows are then re-placed between the inner
+    lips, as the face world builds them (face/template.place_mouth_band): they are not
+    skin the network should have to predict, and outside the mouth they coincide, so any
+    error between them would show as a crease.  Returns the meshes (F, V, 3) float32 in
+    mm."""
     neutral = check_neutral_mesh(neutral_vertices)
     landmarks = check_landmark_sequence(landmark_sequence)
     model = model or load_deformer()
     delta = landmarks - neutral[tpl.get_template().landmark_index]
     with torch.no_grad():
-        dm = model(torch.as_tensor(neutral)[None], torch.as_tensor(delta)[None])[0].numpy()
+        dm = model(
+            torch.as_tensor(neutral)[None], torch.as_tensor(delta)[None]
+        )[0].numpy()
     return tpl.place_mouth_band(neutral[None] + dm, tpl.get_template())
 
 

@@ -162,15 +162,27 @@ class GaussianDiffusion:
 
     # ----------------------------------------------------------------------------- forward process
     def q_sample(self, x0, t, eps=None, generator=None):
-        """Sample x_t ~ q(x_t | x_0) = N(sqrt(abar_t) x_0, (1 - abar_t) I)   (Eq. 3; Eq. 6 with eps)."""
+        """Sample x_t ~ q(x_t | x_0) = N(sqrt(abar_t) x_0, (1 - abar_t) I)
+        (Eq. 3; Eq. 6 with eps)."""
         if eps is None:
-            eps = torch.randn(x0.shape, generator=generator, dtype=x0.dtype).to(x0.device)
-        return _extract(self.sqrt_alphas_bar, t, x0) * x0 + _extract(self.sqrt_one_minus_alphas_bar, t, x0) * eps
+            eps = torch.randn(
+                x0.shape, generator=generator, dtype=x0.dtype
+            ).to(x0.device)
+        return (
+            _extract(self.sqrt_alphas_bar, t, x0) * x0
+            + _extract(self.sqrt_one_minus_alphas_bar, t, x0) * eps
+        )
 
     def q_step(self, x_prev, t, generator=None):
-        """Sample x_t ~ q(x_t | x_{t-1}) = N(sqrt(1 - beta_t) x_{t-1}, beta_t I)   (Eq. 2)."""
-        eps = torch.randn(x_prev.shape, generator=generator, dtype=x_prev.dtype).to(x_prev.device)
-        return _extract(np.sqrt(self.alphas), t, x_prev) * x_prev + _extract(np.sqrt(self.betas), t, x_prev) * eps
+        """Sample x_t ~ q(x_t | x_{t-1}) = N(sqrt(1 - beta_t) x_{t-1}, beta_t I)
+        (Eq. 2)."""
+        eps = torch.randn(
+            x_prev.shape, generator=generator, dtype=x_prev.dtype
+        ).to(x_prev.device)
+        return (
+            _extract(np.sqrt(self.alphas), t, x_prev) * x_prev
+            + _extract(np.sqrt(self.betas), t, x_prev) * eps
+        )
 
     def q_posterior(self, x0, xt, t):
         """Mean and variance of q(x_{t-1} | x_t, x_0) = N(mu~_t(x_t, x_0), beta~_t I)."""
@@ -207,17 +219,30 @@ class GaussianDiffusion:
         return {**self.mean_variance_from_eps(xt, t, eps), "time": float(self.timesteps[t])}
 
     def mean_variance_from_eps(self, xt, t, eps):
-        """:meth:`p_mean_variance` for a given noise estimate eps (the mean is linear in eps)."""
+        """:meth:`p_mean_variance` for a given noise estimate eps
+        (the mean is linear in eps)."""
         x0 = self.predict_x0(xt, t, eps)
         variance = _extract(self.sigmas ** 2, t, xt)
         if self.eta is None:
-            mean = (xt - _extract(self.eps_coef, t, xt) * eps) / _extract(np.sqrt(self.alphas), t, xt)
+            mean = (
+                (xt - _extract(self.eps_coef, t, xt) * eps)
+                / _extract(np.sqrt(self.alphas), t, xt)
+            )
             guidance_variance = variance
         else:
             abar_prev = _extract(self.alphas_bar_prev, t, xt)
-            mean = abar_prev.sqrt() * x0 + (1.0 - abar_prev - variance).clamp_min(0.0).sqrt() * eps
+            mean = (
+                abar_prev.sqrt() * x0
+                + (1.0 - abar_prev - variance).clamp_min(0.0).sqrt() * eps
+            )
             guidance_variance = _extract(self.betas, t, xt)
-        return {"mean": mean, "variance": variance, "guidance_variance": guidance_variance, "eps": eps, "x0": x0}
+        return {
+            "mean": mean,
+            "variance": variance,
+            "guidance_variance": guidance_variance,
+            "eps": eps,
+            "x0": x0,
+        }
 
     def p_sample(self, model, xt, t, generator=None, mask=None, guide=None):
         """Sample x_{t-1} ~ p_theta(x_{t-1} | x_t) = N(mu_theta(x_t, t), sigma_t^2 I)   (Eq. 5).
@@ -295,25 +320,43 @@ class GaussianDiffusion:
         return x
 
     def invert(self, model, x0, mask=None, progress=False, refine=0, trajectory=False):
-        """DDIM inversion: x_0 -> x_T by the deterministic DDIM step run forwards, x_t = sqrt(abar_t) x0_hat +
-        sqrt(1 - abar_t) eps.  The step from x_t back to x_{t-1} reads eps_theta(x_t, t), which is not known
-        before x_t is: the usual inversion takes it at x_{t-1} (an error of first order in the step), and
-        ``refine`` fixed-point iterations then re-read it at the x_t found, so that the DDIM step from x_t lands
-        on x_{t-1} again (Pan et al. 2023, AIDI; a fixed number of iterations, no convergence test: each one
-        shrinks the residual by a factor that is smaller the shorter the step).  ``run`` with eta = 0 on this
-        chain brings x_T back to x_0; regenerating it with guidance edits x_0 keeping what x_T encodes.
-        ``trajectory``: return every x_t, t = 0..T, instead of x_T alone."""
-        if isinstance(refine, bool) or not isinstance(refine, (int, np.integer)) or refine < 0:
-            raise ValueError(f"refine must be a number of fixed-point iterations >= 0, got {refine!r}")
+        """DDIM inversion: x_0 -> x_T by the deterministic DDIM step run forwards,
+        x_t = sqrt(abar_t) x0_hat + sqrt(1 - abar_t) eps.  The step from x_t back to
+        x_{t-1} reads eps_theta(x_t, t), which is not known before x_t is: the usual
+        inversion takes it at x_{t-1} (an error of first order in the step), and
+        ``refine`` fixed-point iterations then re-read it at the x_t found, so that the
+        DDIM step from x_t lands on x_{t-1} again (Pan et al. 2023, AIDI; a fixed number
+        of iterations, no convergence test: each one shrinks the residual by a factor
+        that is smaller the shorter the step).  ``run`` with eta = 0 on this chain
+        brings x_T back to x_0; regenerating it with guidance edits x_0 keeping what x_T
+        encodes.  ``trajectory``: return every x_t, t = 0..T, instead of x_T alone."""
+        if (
+            isinstance(refine, bool)
+            or not isinstance(refine, (int, np.integer))
+            or refine < 0
+        ):
+            raise ValueError(
+                "refine must be a number of fixed-point iterations >= 0, "
+                f"got {refine!r}"
+            )
         net, path = self.wrap(model), [x0]
         with torch.no_grad():
-            for t in tqdm(range(1, self.num_steps + 1), desc="inverting", disable=not progress, leave=False):
+            for t in tqdm(
+                range(1, self.num_steps + 1),
+                desc="inverting",
+                disable=not progress,
+                leave=False,
+            ):
                 x = path[-1]
-                abar_prev, abar = _extract(self.alphas_bar_prev, t, x), _extract(self.alphas_bar, t, x)
+                abar_prev, abar = (
+                    _extract(self.alphas_bar_prev, t, x),
+                    _extract(self.alphas_bar, t, x),
+                )
                 xt = x
                 for _ in range(1 + refine):
                     eps = net(xt, t, mask)
-                    # the x0_hat that the step back from x_t reads, then the x_t it implies
+                    # the x0_hat that the step back from x_t reads,
+                    # then the x_t it implies
                     x0_hat = (x - (1.0 - abar_prev).sqrt() * eps) / abar_prev.sqrt()
                     xt = abar.sqrt() * x0_hat + (1.0 - abar).sqrt() * eps
                 path.append(xt)
@@ -341,24 +384,48 @@ class GaussianDiffusion:
             return np.minimum(snr, min_snr_gamma) / snr
         return {"eps": np.ones_like(snr), "x0": 1.0 / snr, "v": 1.0 + 1.0 / snr}[prediction]
 
-    def training_loss(self, model, x0, t=None, generator=None, mask=None, eps=None, prediction="eps",
-                      min_snr_gamma=None, **model_inputs):
-        """The simple loss of Eq. 8, E_{t, x_0, eps} ||eps - eps_theta(x_t, t)||^2 (mean over valid entries),
-        or with ``prediction`` "x0" / "v" or ``min_snr_gamma`` that objective (:meth:`loss_weights`).
+    def training_loss(
+        self,
+        model,
+        x0,
+        t=None,
+        generator=None,
+        mask=None,
+        eps=None,
+        prediction="eps",
+        min_snr_gamma=None,
+        **model_inputs,
+    ):
+        """The simple loss of Eq. 8, E_{t, x_0, eps} ||eps - eps_theta(x_t, t)||^2 (mean
+        over valid entries), or with ``prediction`` "x0" / "v" or ``min_snr_gamma`` that
+        objective (:meth:`loss_weights`).
 
-        t (B,) and eps (like x0) are drawn from ``generator`` unless given; ``model_inputs`` (a conditional
-        denoiser's ``labels``) go to the model, which returns its noise estimate whatever it predicts."""
+        t (B,) and eps (like x0) are drawn from ``generator`` unless given;
+        ``model_inputs`` (a conditional denoiser's ``labels``) go to the model, which
+        returns its noise estimate whatever it predicts."""
         if t is None:
-            t = torch.randint(1, self.num_steps + 1, (x0.shape[0],), generator=generator)
+            t = torch.randint(
+                1, self.num_steps + 1, (x0.shape[0],), generator=generator
+            )
         if eps is None:
-            eps = torch.randn(x0.shape, generator=generator, dtype=x0.dtype).to(x0.device)
+            eps = torch.randn(
+                x0.shape, generator=generator, dtype=x0.dtype
+            ).to(x0.device)
         xt = self.q_sample(x0, t, eps)
-        pred = model(xt, torch.as_tensor(self.timesteps[t.cpu().numpy()], dtype=torch.float32).to(x0.device), mask,
-                     **model_inputs)
+        pred = model(
+            xt,
+            torch.as_tensor(
+                self.timesteps[t.cpu().numpy()], dtype=torch.float32
+            ).to(x0.device),
+            mask,
+            **model_inputs,
+        )
         err = (eps - pred) ** 2
         if prediction != "eps" or min_snr_gamma is not None:
             weights = self.loss_weights(t.cpu().numpy(), prediction, min_snr_gamma)
-            err = err * torch.as_tensor(weights, dtype=err.dtype, device=err.device).reshape(-1, 1, 1, 1)
+            err = err * torch.as_tensor(
+                weights, dtype=err.dtype, device=err.device
+            ).reshape(-1, 1, 1, 1)
         if mask is None:
             return err.mean()
         m = mask[:, :, None, None].to(err.dtype)

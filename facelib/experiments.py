@@ -12,24 +12,37 @@ from .face.aus import AU_NAMES
 from .tasks import data_ranges, fitted_curves, label_control, unconditional
 
 
-def table1_generators(dataset, indices, steps, guide, denoiser, mean_shift_scale, seed=0):
-    """The rows of Table 1 (§5.1) for the test sequences ``indices`` of ``dataset``: {row: callable() ->
-    sequences (n, F, 68, 3) in mm}, each asked for the labels of those sequences: the sequences themselves
-    (the ground truth), the two trained baselines, the unguided DDPM, classic mean-shift guidance at
-    ``mean_shift_scale`` and Alg. 1 (with ``steps`` reverse steps, ``guide`` and ``denoiser``).  Score them
+def table1_generators(
+    dataset, indices, steps, guide, denoiser, mean_shift_scale, seed=0
+):
+    """The rows of Table 1 (§5.1) for the test sequences ``indices`` of ``dataset``:
+    {row: callable() -> sequences (n, F, 68, 3) in mm}, each asked for the labels of
+    those sequences: the sequences themselves (the ground truth), the two trained
+    baselines, the unguided DDPM, classic mean-shift guidance at ``mean_shift_scale``
+    and Alg. 1 (with ``steps`` reverse steps, ``guide`` and ``denoiser``).  Score them
     with :func:`facelib.evaluation.compare`."""
     test = data.load_dataset(dataset, "test")
     indices = np.asarray(indices)
     labels, n = [test.label_of(int(i)) for i in indices], len(indices)
     models = {b: load_baseline(b, dataset) for b in LABEL_BASELINES}
-    common = dict(dataset=dataset, steps=steps, seed=seed, denoiser=denoiser, progress=False)
+    common = dict(
+        dataset=dataset, steps=steps, seed=seed, denoiser=denoiser, progress=False
+    )
     return {
         "Ground truth (test split)": lambda: test.landmarks[indices],
-        "Motion3DGAN-style (MoGAN)": lambda: generate(models["motion3dgan"], labels, seed=seed),
+        "Motion3DGAN-style (MoGAN)": lambda: generate(
+            models["motion3dgan"], labels, seed=seed
+        ),
         "ACTOR-style CVAE": lambda: generate(models["actor"], labels, seed=seed),
         "DDPM, unguided": lambda: unconditional(n, **common),
         f"DDPM + mean shift (scale {mean_shift_scale:g})": lambda: label_control(
-            labels, n, guide=guide, method="mean_shift", scale=mean_shift_scale, **common),
+            labels,
+            n,
+            guide=guide,
+            method="mean_shift",
+            scale=mean_shift_scale,
+            **common,
+        ),
         "DDPM + Alg. 1 (ours)": lambda: label_control(labels, n, guide=guide, **common),
     }
 

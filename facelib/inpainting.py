@@ -143,10 +143,13 @@ class KnownFrames:
     inner: Optional[Callable] = None
 
     def noised(self, t):
-        """x_t ~ q(x_t | x_0) on every frame (Eq. 3, with the correct sqrt(abar_t)); x_0 itself at t = 0."""
+        """x_t ~ q(x_t | x_0) on every frame (Eq. 3, with the correct sqrt(abar_t));
+        x_0 itself at t = 0."""
         if t == 0:
             return self.x0
-        return self.diffusion.q_sample(self.x0, torch.full((len(self.x0),), t), generator=self.generator)
+        return self.diffusion.q_sample(
+            self.x0, torch.full((len(self.x0),), t), generator=self.generator
+        )
 
     def start(self, generator):
         """x_T: N(0, I) on the unknown frames, q(x_T | x_0) on the known ones (Alg. 3 lines 1-2)."""
@@ -177,11 +180,13 @@ def known_coordinates(known):
 def mean_imputation(sequences, known):
     """Baseline: every missing frame is the mean of the sequence's known frames.
 
-    Our reading of the paper's undefined "mean imputation" (§5.3): the per-sequence mean over time,
-    the classic imputation of a missing value by the mean of the observed ones; it keeps the
-    subject's anatomy (a dataset mean would not) and carries no motion."""
+    Our reading of the paper's undefined "mean imputation" (§5.3): the per-sequence mean
+    over time, the classic imputation of a missing value by the mean of the observed
+    ones; it keeps the subject's anatomy (a dataset mean would not) and carries no
+    motion."""
     x, m = check_fill_input(sequences, known)
-    mean = x.sum(1, keepdims=True) / m.sum(1)[:, None, None, None]  # unknown frames are zero
+    # unknown frames are zero
+    mean = x.sum(1, keepdims=True) / m.sum(1)[:, None, None, None]
     return keep_known(mean, x, m)
 
 

@@ -84,30 +84,43 @@ def landmark_statistics(sequences):
 
 
 def frechet_distance(features_a, features_b):
-    """Fréchet distance between Gaussians fitted to two feature sets (n, d) (the FID of Heusel et
-    al. 2017): ||mu_a - mu_b||^2 + tr(C_a + C_b - 2 (C_a C_b)^(1/2)).  The paper (§5) feeds it the
-    output of the IC's linear layer, the class logits (:meth:`facelib.evaluation.Evaluator.features`)."""
+    """Fréchet distance between Gaussians fitted to two feature sets (n, d) (the FID of
+    Heusel et al. 2017): ||mu_a - mu_b||^2 + tr(C_a + C_b - 2 (C_a C_b)^(1/2)).  The
+    paper (§5) feeds it the output of the IC's linear layer, the class logits
+    (:meth:`facelib.evaluation.Evaluator.features`)."""
     a, b = (np.asarray(f, dtype=np.float64) for f in (features_a, features_b))
     if a.ndim != 2 or b.ndim != 2 or a.shape[1] != b.shape[1]:
-        raise ValueError(f"features must be two (n, d) arrays with the same d, got {a.shape} and {b.shape}")
+        raise ValueError(
+            "features must be two (n, d) arrays with the same d, "
+            f"got {a.shape} and {b.shape}"
+        )
     if min(len(a), len(b)) < 2:
-        raise ValueError("the Fréchet distance needs at least 2 feature vectors per set")
+        raise ValueError(
+            "the Fréchet distance needs at least 2 feature vectors per set"
+        )
     if not (np.isfinite(a).all() and np.isfinite(b).all()):
         raise ValueError("features contain NaN or infinite values")
     mu_a, mu_b = a.mean(0), b.mean(0)
-    cov_a, cov_b = np.atleast_2d(np.cov(a, rowvar=False)), np.atleast_2d(np.cov(b, rowvar=False))
-    # tr((C_a C_b)^(1/2)) = sum of sqrt of the eigenvalues of C_a^(1/2) C_b C_a^(1/2) (symmetric, PSD).
+    cov_a, cov_b = (
+        np.atleast_2d(np.cov(a, rowvar=False)),
+        np.atleast_2d(np.cov(b, rowvar=False)),
+    )
+    # tr((C_a C_b)^(1/2)) = sum of sqrt of the eigenvalues of C_a^(1/2) C_b C_a^(1/2)
+    # (symmetric, PSD).
     w, v = np.linalg.eigh(cov_a)
     root_a = (v * np.sqrt(np.clip(w, 0, None))) @ v.T
     cross = np.linalg.eigvalsh(root_a @ cov_b @ root_a)
     trace_sqrt = np.sqrt(np.clip(cross, 0, None)).sum()
-    fid = ((mu_a - mu_b) ** 2).sum() + np.trace(cov_a) + np.trace(cov_b) - 2 * trace_sqrt
-    return float(max(fid, 0.0))  # >= 0 exactly; round-off can leave -1e-15 for identical sets
+    fid = (
+        ((mu_a - mu_b) ** 2).sum() + np.trace(cov_a) + np.trace(cov_b) - 2 * trace_sqrt
+    )
+    # >= 0 exactly; round-off can leave -1e-15 for identical sets
+    return float(max(fid, 0.0))
 
 
 def diversity(features, num_pairs=200, seed=0):
-    """Diversity as in Action2Motion / ACTOR / MDM: mean distance between the features of
-    ``num_pairs`` random pairs of generated sequences (whatever their labels)."""
+    """Diversity as in Action2Motion / ACTOR / MDM: mean distance between the features
+    of ``num_pairs`` random pairs of generated sequences (whatever their labels)."""
     f = np.asarray(features, dtype=np.float64)
     rng = np.random.default_rng(seed)
     i, j = rng.integers(0, len(f), num_pairs), rng.integers(0, len(f), num_pairs)
@@ -116,8 +129,9 @@ def diversity(features, num_pairs=200, seed=0):
 
 
 def multimodality(features, labels, num_pairs=20, seed=0):
-    """Multimodality as in Action2Motion / ACTOR / MDM: for each label, mean feature distance of
-    ``num_pairs`` random pairs of sequences generated for that label; averaged over labels."""
+    """Multimodality as in Action2Motion / ACTOR / MDM: for each label, mean feature
+    distance of ``num_pairs`` random pairs of sequences generated for that label;
+    averaged over labels."""
     f, y = np.asarray(features, dtype=np.float64), np.asarray(labels)
     rng = np.random.default_rng(seed)
     per_label = []
@@ -185,43 +199,59 @@ def interval_order(a, b):
 
 
 def bootstrap_interval(statistic, *samples, num_resamples=1000, level=0.95, seed=0):
-    """Bias-corrected percentile bootstrap interval of ``statistic(*samples)`` over their rows.
+    """Bias-corrected percentile bootstrap interval of ``statistic(*samples)`` over
+    their rows.
 
-    The samples (arrays with the same first dimension: one row per generated or test sequence)
-    are resampled together, with replacement, ``num_resamples`` times.  The (1 - level) / 2 and
-    (1 + level) / 2 quantiles of the statistic over the resamples are shifted by the bootstrap's
-    estimate of its bias, mean(resampled values) - statistic(samples), and returned as (low, high).
-    The shift matters for FID and diversity: a resample repeats some sequences, which acts like
-    fewer distinct sequences, and FID grows as n shrinks (the evaluation chapter), so the plain percentile
-    interval of an FID lies above the FID itself.  For a mean (accuracy) the shift is about 0.
-    This is the interval of every Acc, FID and diversity the book compares: how much the number
-    would move with another draw of the same number of sequences.
+    The samples (arrays with the same first dimension: one row per generated or test
+    sequence) are resampled together, with replacement, ``num_resamples`` times.
+    The (1 - level) / 2 and (1 + level) / 2 quantiles of the statistic over the
+    resamples are shifted by the bootstrap's estimate of its bias,
+    mean(resampled values) - statistic(samples), and returned as (low, high).  The
+    shift matters for FID and diversity: a resample repeats some sequences, which acts
+    like fewer distinct sequences, and FID grows as n shrinks (the evaluation chapter),
+    so the plain percentile interval of an FID lies above the FID itself.  For a mean
+    (accuracy) the shift is about 0.  This is the interval of every Acc, FID and
+    diversity the book compares: how much the number would move with another draw of
+    the same number of sequences.
     """
     arrays = [np.asarray(s) for s in samples]
     if not arrays or any(len(a) != len(arrays[0]) for a in arrays):
-        raise ValueError(f"need samples with the same number of rows, got {[len(a) for a in arrays]}")
+        raise ValueError(
+            "need samples with the same number of rows, "
+            f"got {[len(a) for a in arrays]}"
+        )
     if len(arrays[0]) < 2:
         raise ValueError("a bootstrap interval needs at least 2 rows")
     if not 0 < level < 1:
         raise ValueError(f"level must be in (0, 1), got {level}")
     rng = np.random.default_rng(seed)
     n = len(arrays[0])
-    values = [statistic(*(a[idx] for a in arrays)) for idx in rng.integers(0, n, (num_resamples, n))]
+    values = [
+        statistic(*(a[idx] for a in arrays))
+        for idx in rng.integers(0, n, (num_resamples, n))
+    ]
     bias = np.mean(values) - statistic(*arrays)
     low, high = np.quantile(values, [(1 - level) / 2, (1 + level) / 2]) - bias
     return float(low), float(high)
 
 
 def completion_spread(completions, known):
-    """How different the completions of one input are: per input, the distance between two of its K
-    completions (mm, mean over landmarks and over the unknown frames), averaged over the K(K-1)/2 pairs.
+    """How different the completions of one input are: per input, the distance between
+    two of its K completions (mm, mean over landmarks and over the unknown frames),
+    averaged over the K(K-1)/2 pairs.
 
-    completions: (n, K, F, 68, 3), K >= 2 completions of each of n inputs; known: (n, F) bool.  Returns (n,)."""
+    completions: (n, K, F, 68, 3), K >= 2 completions of each of n inputs;
+    known: (n, F) bool.  Returns (n,)."""
     c, m = np.asarray(completions), np.asarray(known, bool)
     if c.ndim != 5 or c.shape[1] < 2 or m.shape != (c.shape[0], c.shape[2]):
-        raise ValueError(f"need completions (n, K >= 2, F, 68, 3) and known (n, F), got {c.shape} and {m.shape}")
+        raise ValueError(
+            "need completions (n, K >= 2, F, 68, 3) and known (n, F), "
+            f"got {c.shape} and {m.shape}"
+        )
     pairs = [(a, b) for a in range(c.shape[1]) for b in range(a + 1, c.shape[1])]
-    dist = np.stack([np.linalg.norm(c[:, a] - c[:, b], axis=-1).mean(-1) for a, b in pairs])  # (pairs, n, F)
+    dist = np.stack(
+        [np.linalg.norm(c[:, a] - c[:, b], axis=-1).mean(-1) for a, b in pairs]
+    )  # (pairs, n, F)
     return np.array([dist[:, i, ~m[i]].mean() for i in range(len(m))])
 
 
@@ -315,7 +345,11 @@ def precision_recall_coverage(real, generated, k=5):
         raise ValueError(f"need feature matrices (n, D) of one width, got {real.shape} "
                          f"and {generated.shape}")
     largest = min(len(real), len(generated)) - 1
-    if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 1 <= k <= largest:
+    if (
+        isinstance(k, bool)
+        or not isinstance(k, (int, np.integer))
+        or not 1 <= k <= largest
+    ):
         raise ValueError(f"k must be an integer in 1..{largest}, got {k!r}")
     real_radii = _kth_neighbour_radii(real, k)
     generated_radii = _kth_neighbour_radii(generated, k)

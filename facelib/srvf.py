@@ -40,7 +40,8 @@ def norm(a):
 
 
 def to_srvf(motion):
-    """(q, arc length) of motions (..., F, D): q (..., F-1, D) on the unit sphere (Eq. 2 normalised)."""
+    """(q, arc length) of motions (..., F, D): q (..., F-1, D) on the unit sphere
+    (Eq. 2 normalised)."""
     velocity = torch.diff(motion, dim=-2) * (motion.shape[-2] - 1)
     speed = velocity.norm(dim=-1, keepdim=True)
     q = velocity / speed.clamp_min(_TINY).sqrt() * (speed > _TINY)

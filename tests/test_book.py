@@ -87,6 +87,68 @@ def test_notebook_code_fits_the_page_column():
                 assert len(line) <= 88, f"{nb.name}, cell {cell.get('id')}: {len(line)} characters: {line}"
 
 
+def shown_sources():
+    """Every ``show_source(X)`` of the notebooks as (notebook, X, object): X is resolved as the notebook
+    resolves it, by running the notebook's own import of X's first name (``from facelib... import``)
+    and following the attributes (an inherited method resolves to the base class's function, whose
+    source is what the page shows).  A name that does not resolve to a facelib object fails."""
+    import ast
+    import importlib
+    import inspect
+
+    shown = []
+    for nb in sorted((ROOT / "book").glob("*.ipynb")):
+        cells = ["".join(c["source"]) for c in json.loads(nb.read_text())["cells"] if c["cell_type"] == "code"]
+        trees = [ast.parse(re.sub(r"(?m)^(\s*)([%!])", r"\1#\2", code)) for code in cells]  # magics out
+        imports, calls = {}, []
+        for node in (n for tree in trees for n in ast.walk(tree)):
+            if isinstance(node, ast.ImportFrom) and (node.module or "").split(".")[0] == "facelib":
+                for alias in node.names:
+                    imports[alias.asname or alias.name] = (node.module, alias.name)
+            elif isinstance(node, ast.Import):
+                for alias in node.names:
+                    if alias.name.split(".")[0] == "facelib":
+                        imports[alias.asname or alias.name.split(".")[0]] = (None, alias.name.split(".")[0])
+            elif isinstance(node, ast.Call) and (getattr(node.func, "attr", None) == "show_source"
+                                                 or getattr(node.func, "id", None) == "show_source"):
+                assert len(node.args) == 1, f"{nb.name}: show_source takes one object: {ast.unparse(node)}"
+                calls.append(ast.unparse(node.args[0]))
+        for name in calls:
+            first, *attributes = name.split(".")
+            assert first in imports, f"{nb.name}: show_source({name}): {first} is not imported from facelib"
+            module, imported = imports[first]
+            if module is None:
+                obj = importlib.import_module(imported)
+            else:
+                parent = importlib.import_module(module)
+                obj = getattr(parent, imported) if hasattr(parent, imported) else importlib.import_module(
+                    f"{module}.{imported}")
+            for attribute in attributes:
+                assert hasattr(obj, attribute), f"{nb.name}: show_source({name}): no attribute {attribute}"
+                obj = getattr(obj, attribute)
+            assert inspect.isfunction(obj) or inspect.isclass(obj), f"{nb.name}: show_source({name}): {obj!r}"
+            assert obj.__module__.split(".")[0] == "facelib", f"{nb.name}: show_source({name}) is not facelib's"
+            shown.append((nb.name, name, obj))
+    return shown
+
+
+def test_facelib_code_the_book_shows_fits_the_page_column():
+    """viz.show_source prints a facelib function or class in a code block of the page, which wraps lines
+    wider than about 88 characters as a notebook's own code does: the source of every object a chapter
+    shows keeps within 88 (code as black -l 88 formats it, comments and docstrings wrapped by hand)."""
+    import inspect
+
+    shown = shown_sources()
+    assert len(shown) >= 40, f"only {len(shown)} show_source calls found"
+    too_wide = []
+    for nb, name, obj in shown:
+        lines, start = inspect.getsourcelines(obj)
+        path = Path(inspect.getsourcefile(obj)).relative_to(ROOT)
+        too_wide += [f"{nb}: show_source({name}): {path}:{start + i}: {len(line.rstrip(chr(10)))} characters"
+                     for i, line in enumerate(lines) if len(line.rstrip("\n")) > 88]
+    assert not too_wide, f"{len(too_wide)} lines wider than 88:\n" + "\n".join(too_wide)
+
+
 PAGES = sorted((ROOT / "book").glob("*.ipynb")) + [ROOT / "book" / n for n in ("intro.md", "errata.md", "notation.md")]
 INLINE = re.compile(r"\{[a-z:]+\}`[^`]*`|`[^`]*`|\$\$.*?\$\$|\$[^$\n]*\$", re.S)
 PLAIN_REFERENCE = re.compile(r"\b(?:[Cc]hapters? \d\d|[Aa]ppendix A1|[Ss]ections? \d+(?! of the paper))\b")

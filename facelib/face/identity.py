@@ -52,27 +52,34 @@ def depth_gains(coeffs):
 
 
 def warp(canonical, coeffs):
-    """Warp canonical (x0, y0) (..., 2) to the identity's (x, y) in mm (smooth, nonlinear in s)."""
+    """Warp canonical (x0, y0) (..., 2) to the identity's (x, y) in mm
+    (smooth, nonlinear in s)."""
     s = _as_coeffs(coeffs)
     m = {k: v for k, v in zip(IDENTITY_MODES, s)}
     th = {k: np.tanh(v) for k, v in m.items()}
     x, y = canonical[..., 0], canonical[..., 1]
     ax, sx = np.abs(x), np.sign(x)
     my = tpl.MOUTH_Y
-    dx = (3.2 * th["eye_spacing"] * sx * bump(ax, y, 31.0, 31.0, 20.0, 14.0)
-          + 0.16 * th["eye_size"] * (ax - 31.0) * sx * bump(ax, y, 31.0, 31.5, 16.0, 10.0)
-          + 0.20 * th["nose_width"] * x * bump(x, y, 0.0, -8.0, 18.0, 12.0)
-          + 0.16 * th["mouth_width"] * x * bump(x, y, 0.0, my, 30.0, 12.0)
-          + 3.0 * th["cheek_fullness"] * sx * bump(ax, y, 52.0, -10.0, 20.0, 25.0)
-          + 0.12 * th["jaw_width"] * x * smoothstep((-20.0 - y) / 50.0)
-          + 1.6 * th["asymmetry"] * bump(x, y, 15.0, -30.0, 35.0, 30.0))
-    dy = (0.16 * th["eye_size"] * (y - 31.5) * bump(ax, y, 31.0, 31.5, 16.0, 10.0)
-          + 2.8 * th["brow"] * bump(ax, y, 32.0, 48.0, 30.0, 8.0)
-          - 3.5 * th["nose_length"] * bump(x, y, 0.0, -6.0, 16.0, 12.0)
-          + 0.20 * th["lip_fullness"] * (y - my) * bump(x, y, 0.0, my, 28.0, 10.0)
-          - 4.5 * th["chin"] * smoothstep((-60.0 - y) / 35.0)
-          + 1.4 * th["asymmetry"] * x / 70.0 * smoothstep((y + 60.0) / 80.0))
-    length = 1.0 + (np.exp(0.06 * m["face_length"]) - 1.0) * smoothstep((10.0 - y) / 40.0)
+    dx = (
+        3.2 * th["eye_spacing"] * sx * bump(ax, y, 31.0, 31.0, 20.0, 14.0)
+        + 0.16 * th["eye_size"] * (ax - 31.0) * sx * bump(ax, y, 31.0, 31.5, 16.0, 10.0)
+        + 0.20 * th["nose_width"] * x * bump(x, y, 0.0, -8.0, 18.0, 12.0)
+        + 0.16 * th["mouth_width"] * x * bump(x, y, 0.0, my, 30.0, 12.0)
+        + 3.0 * th["cheek_fullness"] * sx * bump(ax, y, 52.0, -10.0, 20.0, 25.0)
+        + 0.12 * th["jaw_width"] * x * smoothstep((-20.0 - y) / 50.0)
+        + 1.6 * th["asymmetry"] * bump(x, y, 15.0, -30.0, 35.0, 30.0)
+    )
+    dy = (
+        0.16 * th["eye_size"] * (y - 31.5) * bump(ax, y, 31.0, 31.5, 16.0, 10.0)
+        + 2.8 * th["brow"] * bump(ax, y, 32.0, 48.0, 30.0, 8.0)
+        - 3.5 * th["nose_length"] * bump(x, y, 0.0, -6.0, 16.0, 12.0)
+        + 0.20 * th["lip_fullness"] * (y - my) * bump(x, y, 0.0, my, 28.0, 10.0)
+        - 4.5 * th["chin"] * smoothstep((-60.0 - y) / 35.0)
+        + 1.4 * th["asymmetry"] * x / 70.0 * smoothstep((y + 60.0) / 80.0)
+    )
+    length = 1.0 + (np.exp(0.06 * m["face_length"]) - 1.0) * smoothstep(
+        (10.0 - y) / 40.0
+    )
     width = np.exp(0.06 * m["face_width"])
     return np.stack([(x + dx) * width, (y + dy) * length], axis=-1)
 

@@ -46,8 +46,9 @@ def steps_of(t, x):
 
 
 def log_p_theta(x, out):
-    """log p_theta(x | x_t) = log N(x; mu_theta(x_t, t), sigma_t^2 I) + const, per sequence (B,), with
-    sigma_t^2 the step's guidance variance (under DDIM beta_t: :meth:`GaussianDiffusion.p_mean_variance`)."""
+    """log p_theta(x | x_t) = log N(x; mu_theta(x_t, t), sigma_t^2 I) + const,
+    per sequence (B,), with sigma_t^2 the step's guidance variance
+    (under DDIM beta_t: :meth:`GaussianDiffusion.p_mean_variance`)."""
     return -((x - out["mean"]) ** 2 / (2 * out["guidance_variance"])).flatten(1).sum(1)
 
 
@@ -94,7 +95,10 @@ class OptimisationGuidance:
         return self.guidance_weight * log_p_theta(x, out) + self.score(x, t_prev)
 
     def __call__(self, x_hat, xt, t, out):
-        if self.max_time is not None and float(self.diffusion.timesteps[t]) > self.max_time:
+        if (
+            self.max_time is not None
+            and float(self.diffusion.timesteps[t]) > self.max_time
+        ):
             return x_hat
         t_prev = steps_of(t - 1, x_hat)
         x = x_hat.detach().clone().requires_grad_(True)
@@ -125,36 +129,51 @@ class MeanShiftGuidance:
         grad = gradient_at(xt, lambda x: self.score(x, steps_of(t, x)))
         if self.diffusion.eta is None:
             return x_hat + self.scale * out["guidance_variance"] * grad
-        # DDIM (Dhariwal & Nichol 2021, Alg. 2): eps_hat = eps - s sqrt(1 - abar_t) grad, the step taken with eps_hat
-        eps = out["eps"] - self.scale * float(self.diffusion.sqrt_one_minus_alphas_bar[t]) * grad
-        return x_hat + self.diffusion.mean_variance_from_eps(xt, t, eps)["mean"] - out["mean"]
+        # DDIM (Dhariwal & Nichol 2021, Alg. 2):
+        # eps_hat = eps - s sqrt(1 - abar_t) grad, the step taken with eps_hat
+        eps = (
+            out["eps"]
+            - self.scale * float(self.diffusion.sqrt_one_minus_alphas_bar[t]) * grad
+        )
+        return (
+            x_hat
+            + self.diffusion.mean_variance_from_eps(xt, t, eps)["mean"]
+            - out["mean"]
+        )
 
 
 @dataclass
 class ReconstructionGuidance:
-    """x_{t-1} = x_hat_{t-1} - scale * grad_{x_t} ||x0_hat(x_t)|S_K - x_0|S_K||  (per sequence).
+    """x_{t-1} = x_hat_{t-1} - scale * grad_{x_t} ||x0_hat(x_t)|S_K - x_0|S_K||
+    (per sequence).
 
-    x0_hat(x_t) = (x_t - sqrt(1 - abar_t) eps_theta(x_t, t)) / sqrt(abar_t) is the model's estimate of
-    the clean sequence (Eq. 6 inverted); its known frames should equal the given ones.  Replacing
-    the known frames (Alg. 3) tells the model nothing about how the unknown frames must change to
-    fit them; this gradient does, through the denoiser.  The norm (not its square) makes the step
-    size independent of how far off the estimate is (DPS).  Costs one backward pass per step.
+    x0_hat(x_t) = (x_t - sqrt(1 - abar_t) eps_theta(x_t, t)) / sqrt(abar_t) is the
+    model's estimate of the clean sequence (Eq. 6 inverted); its known frames should
+    equal the given ones.  Replacing the known frames (Alg. 3) tells the model nothing
+    about how the unknown frames must change to fit them; this gradient does, through
+    the denoiser.  The norm (not its square) makes the step size independent of how far
+    off the estimate is (DPS).  Costs one backward pass per step.
     """
 
     model: torch.nn.Module
     diffusion: GaussianDiffusion
-    x0: torch.Tensor  # (B, F, 68, 3), normalised; only the known frames (or landmarks) are read
-    known: torch.Tensor  # (B, F) bool, or (B, F, 68) bool: known landmarks of a frame (keyframes)
+    # (B, F, 68, 3), normalised; only the known frames (or landmarks) are read
+    x0: torch.Tensor
+    # (B, F) bool, or (B, F, 68) bool: known landmarks of a frame (keyframes)
+    known: torch.Tensor
     scale: float = 1.0
 
     def __post_init__(self):
-        _check_positive("the reconstruction guidance scale", self.scale, allow_zero=True)
+        _check_positive(
+            "the reconstruction guidance scale", self.scale, allow_zero=True
+        )
         self.model = self.diffusion.wrap(self.model)
 
     def known_error(self, x, t):
         """||x0_hat(x)|S_K - x_0|S_K|| per sequence (B,)."""
         eps = self.model(x, t)
-        squared = ((self.diffusion.predict_x0(x, t, eps) - self.x0) ** 2).sum(-1)  # (B, F, 68)
+        # (B, F, 68)
+        squared = ((self.diffusion.predict_x0(x, t, eps) - self.x0) ** 2).sum(-1)
         known = self.known if self.known.ndim == 3 else self.known[:, :, None]
         return (squared * known).sum((1, 2)).sqrt()
 

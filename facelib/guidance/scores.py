@@ -113,9 +113,13 @@ class AUCurveScore(_ChainScore):
         if self.denoiser is None:
             read = self.network(x, t)
         else:
-            x0_hat = self.diffusion.predict_x0(x, t.detach().round().long().cpu(), self.denoiser(x, t))
+            x0_hat = self.diffusion.predict_x0(
+                x, t.detach().round().long().cpu(), self.denoiser(x, t)
+            )
             read = self.network(x0_hat, torch.zeros_like(t))
-        squared = torch.where(m, (read - c) ** 2, torch.zeros((), dtype=x.dtype, device=x.device))
+        squared = torch.where(
+            m, (read - c) ** 2, torch.zeros((), dtype=x.dtype, device=x.device)
+        )
         return -self.weight * squared.sum((1, 2)) / (2 * self.tolerance ** 2)
 
 
@@ -161,23 +165,26 @@ def vocabulary_log_weights(text_embeddings, vocabulary, match_temperature=MATCH_
 
 @dataclass
 class ContrastiveScore(_ChainScore):
-    """score(x, t) = log sum_n w_n p(r_n | x, t) (B,): the text head's probability of the reference
-    descriptions r_n (n, N, D) that the text c matches (not in the paper).
+    """score(x, t) = log sum_n w_n p(r_n | x, t) (B,): the text head's probability of
+    the reference descriptions r_n (n, N, D) that the text c matches (not in the paper).
 
-    * p(r_n | x, t) = softmax_n cos(BiT(x, t), E(r_n)) / tau: the head's InfoNCE softmax, with which it
-      is trained at this tau (facelib/training/recipes.py), over references such as :func:`nearest_wording`;
-    * w_n = softmax_n cos(E(c), E(r_n)) / match_temperature: what c means, as references.  A training
-      description matches itself (w is one-hot on it: the score is log p(c | x, t), Alg. 1's score
-      with the head as a classifier over descriptions); a phrasing never seen in training matches
-      the descriptions nearest to it in the encoder's space.  With a ``vocabulary`` (N, K, D), the
-      descriptions whose meaning is known for each reference's class, w is :func:`vocabulary_log_weights`
-      instead: c is matched against all of them.
+    * p(r_n | x, t) = softmax_n cos(BiT(x, t), E(r_n)) / tau: the head's InfoNCE
+      softmax, with which it is trained at this tau (facelib/training/recipes.py), over
+      references such as :func:`nearest_wording`;
+    * w_n = softmax_n cos(E(c), E(r_n)) / match_temperature: what c means, as
+      references.  A training description matches itself (w is one-hot on it: the score
+      is log p(c | x, t), Alg. 1's score with the head as a classifier over
+      descriptions); a phrasing never seen in training matches the descriptions nearest
+      to it in the encoder's space.  With a ``vocabulary`` (N, K, D), the descriptions
+      whose meaning is known for each reference's class, w is
+      :func:`vocabulary_log_weights` instead: c is matched against all of them.
 
-    Why not the cosine of Eq. 10: its gradient is mostly the direction that every description of
-    the wording shares, and the order of an enriched sentence is a small angle next to it.  For a
-    one-hot w, the gradient of log p(c | x, t) is (grad cos(o, E(c)) - E_p[grad cos(o, E(r))]) / tau:
-    the shared part cancels, and what is left is the direction that tells c from the references it
-    is being confused with, the label while the label is wrong, the order once the label is right."""
+    Why not the cosine of Eq. 10: its gradient is mostly the direction that every
+    description of the wording shares, and the order of an enriched sentence is a small
+    angle next to it.  For a one-hot w, the gradient of log p(c | x, t) is
+    (grad cos(o, E(c)) - E_p[grad cos(o, E(r))]) / tau: the shared part cancels, and
+    what is left is the direction that tells c from the references it is being confused
+    with, the label while the label is wrong, the order once the label is right."""
 
     network: torch.nn.Module
     text_embeddings: torch.Tensor
@@ -189,23 +196,42 @@ class ContrastiveScore(_ChainScore):
     def __post_init__(self):
         shape = torch.as_tensor(self.text_embeddings).shape
         self.references = _unit(self.references)
-        if len(shape) != 2 or self.references.ndim != 3 or self.references.shape[0] != shape[0] \
-                or self.references.shape[-1] != shape[-1]:
-            raise ValueError(f"need references (B, N, D) for text embeddings (B, D) = {tuple(shape)}, "
-                             f"got {tuple(self.references.shape)}")
+        if (
+            len(shape) != 2
+            or self.references.ndim != 3
+            or self.references.shape[0] != shape[0]
+            or self.references.shape[-1] != shape[-1]
+        ):
+            raise ValueError(
+                "need references (B, N, D) for text embeddings (B, D) = "
+                f"{tuple(shape)}, got {tuple(self.references.shape)}"
+            )
         _check_positive("the temperature", self.temperature)
         if self.vocabulary is None:
-            self.log_weights = match_log_weights(self.text_embeddings, self.references, self.match_temperature)
+            self.log_weights = match_log_weights(
+                self.text_embeddings, self.references, self.match_temperature
+            )
         else:
-            self.log_weights = vocabulary_log_weights(self.text_embeddings, self.vocabulary, self.match_temperature)
+            self.log_weights = vocabulary_log_weights(
+                self.text_embeddings, self.vocabulary, self.match_temperature
+            )
             if self.log_weights.shape != self.references.shape[:2]:
-                raise ValueError(f"the vocabulary knows {self.log_weights.shape[1]} classes, the references are "
-                                 f"{self.references.shape[1]}")
+                raise ValueError(
+                    f"the vocabulary knows {self.log_weights.shape[1]} classes, "
+                    f"the references are {self.references.shape[1]}"
+                )
 
     def __call__(self, x, t):
         refs = _repeated(self.references, len(x)).to(x.device)
-        logits = torch.einsum("bd,bnd->bn", self.network.embed(x, t), refs) / self.temperature
-        return torch.logsumexp(_repeated(self.log_weights, len(x)).to(x.device) + torch.log_softmax(logits, -1), -1)
+        logits = (
+            torch.einsum("bd,bnd->bn", self.network.embed(x, t), refs)
+            / self.temperature
+        )
+        return torch.logsumexp(
+            _repeated(self.log_weights, len(x)).to(x.device)
+            + torch.log_softmax(logits, -1),
+            -1,
+        )
 
 
 @dataclass

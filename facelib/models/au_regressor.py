@@ -45,8 +45,9 @@ class AURegressor(BiT):
         self.head = nn.Linear(c.width, c.num_aus)
 
     def forward(self, xt, t, mask=None):
-        """Per-frame AU intensities (B, F, num_aus) of x_t (B, F, 68, 3) at steps t (B,); ``mask`` (B, F)
-        bool marks the valid frames (the outputs of padding frames are meaningless)."""
+        """Per-frame AU intensities (B, F, num_aus) of x_t (B, F, 68, 3)
+        at steps t (B,); ``mask`` (B, F) bool marks the valid frames (the outputs of
+        padding frames are meaningless)."""
         check_sequence_input(xt, t, mask, self.config.num_landmarks)
         return self.head(self.encode(motion_input(xt, mask), t, mask))
 

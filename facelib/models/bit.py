@@ -53,9 +53,10 @@ class BiT(nn.Module):
         self.norm = nn.LayerNorm(width)
 
     def encode(self, xt, t, mask=None, prefix=None):
-        """Output tokens (B, P + F, width) of x_t (B, F, L, 3) at steps t (B,); ``prefix`` (P, width)
-        or (B, P, width) are extra tokens put before the frames (they also receive TE(t)); ``mask``
-        (B, F) bool marks the valid frames (prefix tokens are always valid)."""
+        """Output tokens (B, P + F, width) of x_t (B, F, L, 3) at steps t (B,);
+        ``prefix`` (P, width) or (B, P, width) are extra tokens put before the frames
+        (they also receive TE(t)); ``mask`` (B, F) bool marks the valid frames (prefix
+        tokens are always valid)."""
         b, f = xt.shape[:2]
         t = t.to(xt.device)
         frames = torch.arange(1, f + 1, device=xt.device)
@@ -65,7 +66,15 @@ class BiT(nn.Module):
             prefix = prefix if prefix.ndim == 3 else prefix[None].expand(b, -1, -1)
             h = torch.cat([prefix, h], dim=1)
             if mask is not None:
-                mask = torch.cat([torch.ones(b, prefix.shape[1], dtype=torch.bool, device=mask.device), mask], dim=1)
+                mask = torch.cat(
+                    [
+                        torch.ones(
+                            b, prefix.shape[1], dtype=torch.bool, device=mask.device
+                        ),
+                        mask,
+                    ],
+                    dim=1,
+                )
         h = h + self.te(sinusoidal_embedding(t, self.width, dtype=h.dtype))[:, None]
         h = self.encoder(h, src_key_padding_mask=None if mask is None else ~mask)
         return self.norm(h)

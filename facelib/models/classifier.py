@@ -32,7 +32,10 @@ class LSTMClassifier(nn.Module):
 
     def _prepare(self, x):
         if x.ndim != 4 or x.shape[-2:] != (self.lstm.input_size // 3, 3):
-            raise ValueError(f"expected landmark sequences (B, F, {self.lstm.input_size // 3}, 3), got {tuple(x.shape)}")
+            raise ValueError(
+                "expected landmark sequences "
+                f"(B, F, {self.lstm.input_size // 3}, 3), got {tuple(x.shape)}"
+            )
         x = x.flatten(2)
         if self.inputs == "motion":
             x = x - x.mean(dim=1, keepdim=True)

@@ -84,9 +84,12 @@ class Deformer(nn.Module):
         return h
 
     def attend(self, features, delta):
-        """Eq. 11: softmax(FC(Delta L) F_e^T / sqrt(d)) F_e, (B, F, d), and the weights (B, F, 80)."""
+        """Eq. 11: softmax(FC(Delta L) F_e^T / sqrt(d)) F_e, (B, F, d),
+        and the weights (B, F, 80)."""
         q = self.query(delta.flatten(2))  # (B, F, d)
-        weights = torch.softmax(q @ features.transpose(1, 2) / features.shape[-1] ** 0.5, dim=-1)
+        weights = torch.softmax(
+            q @ features.transpose(1, 2) / features.shape[-1] ** 0.5, dim=-1
+        )
         return weights @ features, weights
 
     def latent(self, neutral, delta):
@@ -115,9 +118,10 @@ class Deformer(nn.Module):
 
 
 def landmark_weights(vertices, landmark_index, epsilon=1.0):
-    """S2D's per-vertex loss weights (their Eq. 1): w_i = 1 / max(min_j ||p_i - Z_j||, epsilon), divided
-    by the largest weight.  Min-max rescaling ("re-scaled to [0, 1]") would give the farthest
-    vertex weight 0, i.e. no supervision; dividing by the maximum keeps every vertex in the loss."""
+    """S2D's per-vertex loss weights (their Eq. 1):
+    w_i = 1 / max(min_j ||p_i - Z_j||, epsilon), divided by the largest weight.
+    Min-max rescaling ("re-scaled to [0, 1]") would give the farthest vertex weight 0,
+    i.e. no supervision; dividing by the maximum keeps every vertex in the loss."""
     v = np.asarray(vertices, dtype=np.float64)
     d = np.linalg.norm(v[:, None] - v[np.asarray(landmark_index)][None], axis=-1).min(1)
     w = 1.0 / np.maximum(d, epsilon)
@@ -125,8 +129,8 @@ def landmark_weights(vertices, landmark_index, epsilon=1.0):
 
 
 def deformation_loss(predicted, target, weights, displacement_weight=0.1):
-    """S2D's weighted L1 on the deformed vertices plus 0.1 x the plain L1 of the displacement
-    (predicted, target: Delta M (B, F, V, 3); weights (V,))."""
+    """S2D's weighted L1 on the deformed vertices plus 0.1 x the plain L1 of the
+    displacement (predicted, target: Delta M (B, F, V, 3); weights (V,))."""
     l1 = (predicted - target).abs().sum(-1)  # (B, F, V)
     return (l1 * weights).mean() + displacement_weight * l1.mean()
 

@@ -104,33 +104,48 @@ class Denoiser(BiT):
         return eps
 
     def gaussian_eps(self, xt, t):
-        """E[eps | x_t] if every frame were drawn from N(0, Sigma): a per-frame linear filter."""
+        """E[eps | x_t] if every frame were drawn from N(0, Sigma):
+        a per-frame linear filter."""
         abar = self._abar(t, xt)[..., 0]
         y = xt.reshape(xt.shape[0], xt.shape[1], -1) @ self.prior_basis
         y = y * (1 - abar).sqrt() / (abar * self.prior_variances + 1 - abar)
         return (y @ self.prior_basis.T).reshape(xt.shape)
 
     def forward(self, xt, t, mask=None, labels=None):
-        """Noise estimate for x_t at steps t; ``mask`` (B, F) bool marks the valid frames.  A label-conditional
-        denoiser (``num_classes`` > 0) reads ``labels`` (B,) class indices, ``num_classes`` meaning "no label"
-        (None: no label for any); an unconditional one takes none."""
+        """Noise estimate for x_t at steps t; ``mask`` (B, F) bool marks the valid
+        frames.  A label-conditional denoiser (``num_classes`` > 0) reads ``labels``
+        (B,) class indices, ``num_classes`` meaning "no label" (None: no label for any);
+        an unconditional one takes none."""
         check_sequence_input(xt, t, mask, self.config.num_landmarks)
         k = self.config.num_classes
         if not k:
             if labels is not None:
-                raise ValueError("this denoiser is unconditional (num_classes = 0): it takes no labels")
+                raise ValueError(
+                    "this denoiser is unconditional (num_classes = 0): "
+                    "it takes no labels"
+                )
             tokens = self.encode(xt, t, mask)
         else:
             if labels is None:
                 labels = torch.full((len(xt),), k, device=xt.device)
-            else:  # checked where the caller keeps them (a list, a CPU tensor: no device round trip)
+            else:
+                # checked where the caller keeps them
+                # (a list, a CPU tensor: no device round trip)
                 labels = torch.as_tensor(labels)
                 if labels.shape != (len(xt),) or labels.min() < 0 or labels.max() > k:
-                    raise ValueError(f"labels must be ({len(xt)},) class indices in 0..{k} ({k}: no label)")
-            tokens = self.encode(xt, t, mask, prefix=self.label_embedding(labels.to(xt.device))[:, None])[:, 1:]
-        output = self.out(tokens).reshape(xt.shape)  # the network's estimate of its target (config.prediction)
+                    raise ValueError(
+                        f"labels must be ({len(xt)},) class indices in 0..{k} "
+                        f"({k}: no label)"
+                    )
+            tokens = self.encode(
+                xt, t, mask, prefix=self.label_embedding(labels.to(xt.device))[:, None]
+            )[:, 1:]
+        # the network's estimate of its target (config.prediction)
+        output = self.out(tokens).reshape(xt.shape)
         if self.config.gaussian_skip:
-            output = output + self.from_eps(xt, t, self.gaussian_eps(xt, t.to(xt.device)))
+            output = output + self.from_eps(
+                xt, t, self.gaussian_eps(xt, t.to(xt.device))
+            )
         return self.to_eps(xt, t, output)
 
     def config_dict(self):

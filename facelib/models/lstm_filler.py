@@ -40,22 +40,37 @@ class LSTMFiller(nn.Module):
         self.out = nn.Linear(2 * config.hidden, d)
 
     def forward(self, x, known, z=None, generator=None):
-        """x: (B, F, 68, 3) (unknown frames ignored), known: (B, F) bool; returns (B, F, 68, 3).  ``z`` (B, F, 1):
-        the noise (None: drawn with ``generator``)."""
+        """x: (B, F, 68, 3) (unknown frames ignored), known: (B, F) bool;
+        returns (B, F, 68, 3).  ``z`` (B, F, 1): the noise (None: drawn with
+        ``generator``)."""
         b, f = known.shape
         k = known.to(x.dtype)[:, :, None]
-        flat = torch.where(known[:, :, None], x.flatten(2), torch.zeros((), dtype=x.dtype, device=x.device))
-        mean = flat.sum(1, keepdim=True) / k.sum(1, keepdim=True)  # mean imputation, (B, 1, D)
-        if z is None:  # drawn on the generator's device (the CPU's by default: the same noise on every device)
-            z = torch.randn((b, f, 1), generator=generator, dtype=x.dtype,
-                            device=None if generator is None else generator.device).to(x.device)
+        flat = torch.where(
+            known[:, :, None],
+            x.flatten(2),
+            torch.zeros((), dtype=x.dtype, device=x.device),
+        )
+        # mean imputation, (B, 1, D)
+        mean = flat.sum(1, keepdim=True) / k.sum(1, keepdim=True)
+        if z is None:
+            # drawn on the generator's device
+            # (the CPU's by default: the same noise on every device)
+            z = torch.randn(
+                (b, f, 1),
+                generator=generator,
+                dtype=x.dtype,
+                device=None if generator is None else generator.device,
+            ).to(x.device)
         h, _ = self.lstm(torch.cat([flat - k * mean, k, z], dim=2))
         return (mean + self.out(h)).reshape(x.shape)
 
 
 def masked_l1(prediction, target, known, alpha_gt=10.0):
-    """Berson et al. Eq. 1: alpha_gt |G - X| on the known frames + |G - X| on the missing ones
-    (each a mean over its frames' coordinates)."""
+    """Berson et al. Eq. 1: alpha_gt |G - X| on the known frames + |G - X| on the
+    missing ones (each a mean over its frames' coordinates)."""
     err = (prediction - target).abs().flatten(2).mean(2)  # (B, F)
     k = known.to(err.dtype)
-    return alpha_gt * (err * k).sum() / k.sum().clamp(min=1) + (err * (1 - k)).sum() / (1 - k).sum().clamp(min=1)
+    return (
+        alpha_gt * (err * k).sum() / k.sum().clamp(min=1)
+        + (err * (1 - k)).sum() / (1 - k).sum().clamp(min=1)
+    )

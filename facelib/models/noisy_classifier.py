@@ -61,7 +61,8 @@ class NoisyBiT(BiT):
         self.head = nn.Linear(c.width, out_features)
 
     def forward(self, xt, t, mask=None):
-        """(B, out_features) from x_t (B, F, 68, 3) at steps t (B,); ``mask`` (B, F) bool marks the valid frames."""
+        """(B, out_features) from x_t (B, F, 68, 3) at steps t (B,);
+        ``mask`` (B, F) bool marks the valid frames."""
         check_sequence_input(xt, t, mask, self.config.num_landmarks)
         if self.config.inputs == "motion":
             xt = motion_input(xt, mask)

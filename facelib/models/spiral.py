@@ -77,7 +77,9 @@ class SpiralConv(nn.Module):
         super().__init__()
         indices = torch.as_tensor(np.asarray(indices), dtype=torch.long)
         if indices.ndim != 2:
-            raise ValueError(f"spiral indices must be (V, length), got {tuple(indices.shape)}")
+            raise ValueError(
+                f"spiral indices must be (V, length), got {tuple(indices.shape)}"
+            )
         self.register_buffer("indices", indices, persistent=False)
         self.layer = nn.Linear(in_channels * indices.shape[1], out_channels)
 
@@ -86,15 +88,24 @@ class SpiralConv(nn.Module):
         if v != len(self.indices):
             raise ValueError(f"expected {len(self.indices)} vertices, got {v}")
         length, out = self.indices.shape[1], self.layer.out_features
-        # index_select, not x[:, idx]: the same gather, whose backward (index_add) is 1.6x faster on CPU.
+        # index_select, not x[:, idx]: the same gather, whose backward (index_add) is
+        # 1.6x faster on CPU.
         if out >= c:  # gather (B, V, L, C), reshape, one Linear
-            return self.layer(torch.index_select(x, 1, self.indices.reshape(-1)).reshape(b, v, -1))
-        # Fewer outputs than inputs: the same sum, W [x_s0; x_s1; ...] = sum_l W_l x_sl, computed as
-        # "project every vertex by every W_l, then gather": it moves L * out numbers per vertex, not L * c.
+            return self.layer(
+                torch.index_select(x, 1, self.indices.reshape(-1)).reshape(b, v, -1)
+            )
+        # Fewer outputs than inputs: the same sum,
+        # W [x_s0; x_s1; ...] = sum_l W_l x_sl, computed as "project every vertex by
+        # every W_l, then gather": it moves L * out numbers per vertex, not L * c.
         weight = self.layer.weight.reshape(out, length, c)
         projected = torch.einsum("bvc,olc->bvlo", x, weight).reshape(b, v * length, out)
         slot = self.indices * length + torch.arange(length, device=x.device)
-        return torch.index_select(projected, 1, slot.reshape(-1)).reshape(b, v, length, out).sum(2) + self.layer.bias
+        return (
+            torch.index_select(projected, 1, slot.reshape(-1))
+            .reshape(b, v, length, out)
+            .sum(2)
+            + self.layer.bias
+        )
 
 
 @lru_cache(maxsize=None)

@@ -95,7 +95,18 @@ def geometry_passes(neutral_landmarks, label, n=1, settings=GeometryAdaptive(), 
     return np.stack(results)
 
 
-def geometry_adaptive(neutral_landmarks, label, n=1, settings=GeometryAdaptive(), denoiser=None, guide=None,
-                      progress=True, **overrides):
-    """Geometry-adaptive generation (Alg. 4): the last pass of :func:`geometry_passes`, (n, F, 68, 3) float32 in mm."""
-    return geometry_passes(neutral_landmarks, label, n, settings, denoiser, guide, progress, **overrides)[-1]
+def geometry_adaptive(
+    neutral_landmarks,
+    label,
+    n=1,
+    settings=GeometryAdaptive(),
+    denoiser=None,
+    guide=None,
+    progress=True,
+    **overrides,
+):
+    """Geometry-adaptive generation (Alg. 4): the last pass of :func:`geometry_passes`,
+    (n, F, 68, 3) float32 in mm."""
+    return geometry_passes(
+        neutral_landmarks, label, n, settings, denoiser, guide, progress, **overrides
+    )[-1]

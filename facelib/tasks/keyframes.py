@@ -87,24 +87,41 @@ def check_neutral(neutral):
     return neutral_faces(neutral)
 
 
-def keyframes(keys, n=4, neutral=None, settings=Keyframes(), denoiser=None, progress=True, **overrides):
-    """n sequences (n, F, 68, 3) float32 in mm that meet landmark keyframes (:func:`check_keys`), generated
-    around them by the unconditional DDPM.  ``settings``: :class:`facelib.config.Keyframes` (the method)."""
+def keyframes(
+    keys,
+    n=4,
+    neutral=None,
+    settings=Keyframes(),
+    denoiser=None,
+    progress=True,
+    **overrides,
+):
+    """n sequences (n, F, 68, 3) float32 in mm that meet landmark keyframes
+    (:func:`check_keys`), generated around them by the unconditional DDPM.
+    ``settings``: :class:`facelib.config.Keyframes` (the method)."""
     settings, shape = task_settings(settings, overrides, n)
     neutral = None if neutral is None else check_neutral(neutral)
     given, mask = check_keys(keys, shape[1], neutral)
     denoiser = denoiser or load_denoiser(checkpoint_name("denoiser", settings.dataset))
-    diffusion = denoiser.diffusion_with(settings.steps, settings.variance, settings.ddim_eta)
+    diffusion = denoiser.diffusion_with(
+        settings.steps, settings.variance, settings.ddim_eta
+    )
     x0 = denoiser.to_model(np.broadcast_to(given, shape))
     known = torch.as_tensor(np.broadcast_to(mask, shape[:3]).copy()).to(denoiser.device)
     guide = None
     if settings.method in ("reconstruction", "both"):
-        guide = ReconstructionGuidance(denoiser.model, diffusion, x0, known, settings.reconstruction_scale)
+        guide = ReconstructionGuidance(
+            denoiser.model, diffusion, x0, known, settings.reconstruction_scale
+        )
     if settings.method in ("replace", "both"):
-        guide = KnownFrames(diffusion, x0, known, known_noise(settings.seed), inner=guide)
+        guide = KnownFrames(
+            diffusion, x0, known, known_noise(settings.seed), inner=guide
+        )
         out = guide.sample(denoiser.model, settings.seed, progress=progress)
     else:
-        out = diffusion.sample(denoiser.model, shape, seed=settings.seed, guide=guide, progress=progress)
+        out = diffusion.sample(
+            denoiser.model, shape, seed=settings.seed, guide=guide, progress=progress
+        )
     return denoiser.to_mm(out)
 
 

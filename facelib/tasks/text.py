@@ -60,37 +60,71 @@ def text_score(settings, head, denoiser, embeddings):
     return DenoisedCosineScore(head.model, denoiser.model, denoiser.diffusion, embeddings)
 
 
-def text_control(text, n=8, settings=TextControl(), denoiser=None, head=None, progress=True, callback=None,
-                 **overrides):
-    """Text control (Alg. 2): n sequences (n, F, 68, 3) float32 in mm that show what ``text`` says.
+def text_control(
+    text,
+    n=8,
+    settings=TextControl(),
+    denoiser=None,
+    head=None,
+    progress=True,
+    callback=None,
+    **overrides,
+):
+    """Text control (Alg. 2): n sequences (n, F, 68, 3) float32 in mm that show what
+    ``text`` says.
 
-    text: a description ("disgust high smile", "from the neutral face to bareteeth"), or a list of n
-    descriptions (one per sequence), each embedded once by the offline sentence encoder E (empty,
-    non-string or too long texts are refused).  At every step 3 Adagrad steps maximise
-    lambda log p_theta(x | x_t) + score(x, t-1) (:func:`text_score`).  settings:
-    :class:`facelib.config.TextControl` (lambda None: :func:`text_guidance_weight`; rate None:
-    :func:`text_lr`; particles K > 1: :class:`~facelib.guidance.BestOfK` at the step nearest the time
-    label select_time, no callback); ``overrides`` change single fields."""
+    text: a description ("disgust high smile", "from the neutral face to bareteeth"), or
+    a list of n descriptions (one per sequence), each embedded once by the offline
+    sentence encoder E (empty, non-string or too long texts are refused).  At every step
+    3 Adagrad steps maximise lambda log p_theta(x | x_t) + score(x, t-1)
+    (:func:`text_score`).  settings: :class:`facelib.config.TextControl` (lambda None:
+    :func:`text_guidance_weight`; rate None: :func:`text_lr`; particles K > 1:
+    :class:`~facelib.guidance.BestOfK` at the step nearest the time label select_time,
+    no callback); ``overrides`` change single fields."""
     settings, shape = task_settings(settings, overrides, n)
     if settings.particles > 1 and callback is not None:
-        raise ValueError("text_control takes no callback with particles > 1 (the batch changes at select_time)")
+        raise ValueError(
+            "text_control takes no callback with particles > 1 "
+            "(the batch changes at select_time)"
+        )
     texts = text_list(text, n)
     embeddings = torch.as_tensor(get_encoder().encode(texts))
     head = head or load_text_head(settings.dataset)
     if head.classifier_type != "text":
-        raise ValueError("text control needs a text head (load_text_head), not a label classifier")
+        raise ValueError(
+            "text control needs a text head (load_text_head), not a label classifier"
+        )
     denoiser, diffusion = guided_chain(head, denoiser, settings)
     score = text_score(settings, head, denoiser, embeddings)
-    weight = text_guidance_weight(settings.score) if settings.guidance_weight is None else settings.guidance_weight
+    weight = (
+        text_guidance_weight(settings.score)
+        if settings.guidance_weight is None
+        else settings.guidance_weight
+    )
     lr = settings.lr
     if lr is None:
-        lr = text_lr(settings.steps, head.meta["training"]["num_diffusion_steps"], settings.score)
-    hook = OptimisationGuidance(score, diffusion, weight, lr, max_time=settings.max_time)
+        lr = text_lr(
+            settings.steps,
+            head.meta["training"]["num_diffusion_steps"],
+            settings.score,
+        )
+    hook = OptimisationGuidance(
+        score, diffusion, weight, lr, max_time=settings.max_time
+    )
     if settings.particles == 1:
-        x = diffusion.sample(denoiser.model, shape, seed=settings.seed, guide=hook, progress=progress,
-                             callback=callback)
+        x = diffusion.sample(
+            denoiser.model,
+            shape,
+            seed=settings.seed,
+            guide=hook,
+            progress=progress,
+            callback=callback,
+        )
     else:
-        select = max(1, int(np.argmin(np.abs(diffusion.timesteps - settings.select_time))))
-        x = BestOfK(score, settings.particles, select).sample(diffusion, denoiser.model, shape, hook, settings.seed,
-                                                              progress)
+        select = max(
+            1, int(np.argmin(np.abs(diffusion.timesteps - settings.select_time)))
+        )
+        x = BestOfK(score, settings.particles, select).sample(
+            diffusion, denoiser.model, shape, hook, settings.seed, progress
+        )
     return denoiser.to_mm(x)

@@ -276,28 +276,45 @@ class AURegressorRecipe(_NoisyRecipe):
         return checkpoint_name("au_regressor", self.settings.dataset)
 
 
-def text_head_loss(output, table, labels, kinds, choice, contrastive_weight=1.0, temperature=0.05):
-    """The loss of the text head for outputs (B, D), description table (labels, 2, K, D) and, per
-    sequence, its label, order (kind) and the index of its drawn description.
+def text_head_loss(
+    output, table, labels, kinds, choice, contrastive_weight=1.0, temperature=0.05
+):
+    """The loss of the text head for outputs (B, D), description table (labels, 2, K, D)
+    and, per sequence, its label, order (kind) and the index of its drawn description.
 
     * MotionCLIP's cosine term (§5.2): 1 - cos(output, E(c)), c = the drawn description.
-    * Our contrastive term (CLIP's InfoNCE, one direction): softmax over the descriptions *in the
-      same wording* of every label (and, for an enriched sentence, of both orders) at temperature
-      tau; the cross-entropy of the right one.  The cosine alone is nearly satisfied by pointing
-      at the average description of a label: the two orders' sentences have a cosine of about
-      0.97-0.99 for the encoder, so it never learns the order.
+    * Our contrastive term (CLIP's InfoNCE, one direction): softmax over the
+      descriptions *in the same wording* of every label (and, for an enriched sentence,
+      of both orders) at temperature tau; the cross-entropy of the right one.  The
+      cosine alone is nearly satisfied by pointing at the average description of a
+      label: the two orders' sentences have a cosine of about 0.97-0.99 for the encoder,
+      so it never learns the order.
 
     Returns (loss, cosine term, accuracy of the contrastive choice)."""
     out = nn.functional.normalize(output, dim=-1)
-    candidates = table[:, :, choice].permute(2, 0, 1, 3)  # (B, labels, 2, D): the same wording for every class
+    # (B, labels, 2, D): the same wording for every class
+    candidates = table[:, :, choice].permute(2, 0, 1, 3)
     logits = torch.einsum("bd,blkd->blk", out, candidates) / temperature
-    cosine = 1 - logits[torch.arange(len(out), device=out.device), labels, kinds].mean() * temperature
-    enriched = (table[0, 0, choice] != table[0, 1, choice]).any(-1)  # the order is in the words
-    flat = torch.where(enriched[:, None], logits.flatten(1), torch.cat([logits[:, :, 0], logits[:, :, 0]], 1)
-                       .masked_fill(torch.arange(2 * table.shape[0], device=out.device) >= table.shape[0], -torch.inf))
+    cosine = 1 - logits[
+        torch.arange(len(out), device=out.device), labels, kinds
+    ].mean() * temperature
+    # the order is in the words
+    enriched = (table[0, 0, choice] != table[0, 1, choice]).any(-1)
+    flat = torch.where(
+        enriched[:, None],
+        logits.flatten(1),
+        torch.cat([logits[:, :, 0], logits[:, :, 0]], 1).masked_fill(
+            torch.arange(2 * table.shape[0], device=out.device) >= table.shape[0],
+            -torch.inf,
+        ),
+    )
     target = torch.where(enriched, labels * 2 + kinds, labels)
     contrastive = nn.functional.cross_entropy(flat, target)
-    return cosine + contrastive_weight * contrastive, cosine, (flat.argmax(1) == target).float().mean()
+    return (
+        cosine + contrastive_weight * contrastive,
+        cosine,
+        (flat.argmax(1) == target).float().mean(),
+    )
 
 
 class TextHeadRecipe(_NoisyRecipe):
