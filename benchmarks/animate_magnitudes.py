@@ -10,7 +10,8 @@ row is the same measure on every coma sequence of that label, on the world's noi
 animations are noise-free meshes too).
 Mean and 95 % bootstrap interval over the animations (over the sequences for the data), the smallest
 animation and the data's 10th percentile (how far a weak animation or a weak real sequence goes), and every
-animation's value (column "animations (mm)", in the order face by face, seed by seed).
+animation's value (column "animations (mm)", in the order face by face, seed by seed) and every data
+sequence's ("data sequences (mm)").
 
     python benchmarks/animate_magnitudes.py --save animate_magnitudes
 
@@ -27,7 +28,7 @@ from facelib.face.template import get_template
 
 COLUMNS = ["label", "measure", "animate: mean (mm)", "animate 95 % interval", "data: mean (mm)",
            "data 95 % interval", "animations", "data sequences", "animate: smallest (mm)",
-           "data: 10th percentile (mm)", "animations (mm)"]
+           "data: 10th percentile (mm)", "animations (mm)", "data sequences (mm)"]
 REGIONS = {  # label -> (measure, iBUG-68 landmarks)
     "high_smile": ("mouth corners", [48, 54]),
     "mouth_open": ("lower lip", [57]),
@@ -70,7 +71,8 @@ def main():
         real = apex_displacement(exact[mine], neutrals[mine], region)
         rows.append([label, measure, float(np.mean(moved)), list(metrics.bootstrap_interval(np.mean, np.array(moved))),
                      float(real.mean()), list(metrics.bootstrap_interval(np.mean, real)), len(moved), int(mine.sum()),
-                     float(np.min(moved)), float(np.percentile(real, 10)), [round(float(m), 2) for m in moved]])
+                     float(np.min(moved)), float(np.percentile(real, 10)), [round(float(m), 2) for m in moved],
+                     [round(float(r), 2) for r in real]])
         print(rows[-1], flush=True)
     if args.save:
         results.save_result(args.save, "How far `animate` moves unseen faces at the apex", COLUMNS, rows,
