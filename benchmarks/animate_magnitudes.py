@@ -11,7 +11,8 @@ animations are noise-free meshes too).
 Mean and 95 % bootstrap interval over the animations (over the sequences for the data), the smallest
 animation and the data's 10th percentile (how far a weak animation or a weak real sequence goes), and every
 animation's value (column "animations (mm)", in the order face by face, seed by seed) and every data
-sequence's ("data sequences (mm)").
+sequence's ("data sequences (mm)"); and how many animations the type-S IC (chapter 04) reads as the label
+requested (either order).
 
     python benchmarks/animate_magnitudes.py --save animate_magnitudes
 
@@ -22,13 +23,13 @@ import time
 
 import numpy as np
 
-from facelib import config, data, metrics, pipeline, results
+from facelib import config, data, evaluation, metrics, pipeline, results
 from facelib.face import Face, sample_identity
 from facelib.face.template import get_template
 
 COLUMNS = ["label", "measure", "animate: mean (mm)", "animate 95 % interval", "data: mean (mm)",
            "data 95 % interval", "animations", "data sequences", "animate: smallest (mm)",
-           "data: 10th percentile (mm)", "animations (mm)", "data sequences (mm)"]
+           "data: 10th percentile (mm)", "animations (mm)", "data sequences (mm)", "IC reads the label (%)"]
 REGIONS = {  # label -> (measure, iBUG-68 landmarks)
     "high_smile": ("mouth corners", [48, 54]),
     "mouth_open": ("lower lip", [57]),
@@ -59,25 +60,28 @@ def main():
     exact = np.stack([coma.face(int(coma.subjects[i])).landmarks(coma.au_weights[i].astype(np.float64))
                       for i in range(len(coma))])  # noise-free landmarks of every sequence
     overrides = {} if args.steps is None else {"steps": args.steps}
+    ic = evaluation.load_evaluator("coma", "S")
     rows = []
     for label, (measure, region) in REGIONS.items():
-        moved = []
+        moved, read = [], []
         for k in range(args.faces):
             neutral = Face(sample_identity(FIRST_FACE + k)).neutral.astype(np.float32)
             for s in range(args.seeds):
-                meshes, _, _ = pipeline.animate(neutral, label, seed=k * args.seeds + s, **overrides)
+                meshes, landmarks, _ = pipeline.animate(neutral, label, seed=k * args.seeds + s, **overrides)
                 moved.append(apex_displacement(meshes[:, index], neutral[index], region))
+                read.append(ic.class_names[int(ic.features(landmarks[None]).argmax())].split()[0] == label)
         mine = coma.labels == coma.label_names.index(label)
         real = apex_displacement(exact[mine], neutrals[mine], region)
         rows.append([label, measure, float(np.mean(moved)), list(metrics.bootstrap_interval(np.mean, np.array(moved))),
                      float(real.mean()), list(metrics.bootstrap_interval(np.mean, real)), len(moved), int(mine.sum()),
                      float(np.min(moved)), float(np.percentile(real, 10)), [round(float(m), 2) for m in moved],
-                     [round(float(r), 2) for r in real]])
+                     [round(float(r), 2) for r in real], 100.0 * float(np.mean(read))])
         print(rows[-1], flush=True)
     if args.save:
         results.save_result(args.save, "How far `animate` moves unseen faces at the apex", COLUMNS, rows,
                             results.Run(allow_dirty=args.allow_dirty,
-                                        checkpoints=["denoiser_coma", "guide_coma_S", "deform_ours_identity"],
+                                        checkpoints=["denoiser_coma", "guide_coma_S", "deform_ours_identity",
+                                                     "ic_coma_S"],
                                         seeds=list(range(args.faces * args.seeds)), n=args.faces * args.seeds,
                                         steps=[args.steps or config.GeometryAdaptive().steps],
                                         wall_time_s=time.perf_counter() - t_start),
