@@ -9,7 +9,7 @@ HERE = Path(__file__).resolve().parent
 FONT = 'font-family="DejaVu Sans, Helvetica, Arial, sans-serif"'
 
 
-def box(x, y, w, h, lines, fill="#eef3fb", stroke="#4a6fa5", size=13, bold_first=False):
+def box(x, y, w, h, lines, fill="#eef3fb", stroke="#4a6fa5", size=15, bold_first=False):
     out = [f'<rect x="{x}" y="{y}" width="{w}" height="{h}" rx="8" fill="{fill}" stroke="{stroke}" stroke-width="1.5"/>']
     n = len(lines)
     for i, line in enumerate(lines):
@@ -22,7 +22,7 @@ def box(x, y, w, h, lines, fill="#eef3fb", stroke="#4a6fa5", size=13, bold_first
 def arrow(x1, y1, x2, y2, label=None, dx=0, dy=-6, color="#333"):
     s = f'<line x1="{x1}" y1="{y1}" x2="{x2}" y2="{y2}" stroke="{color}" stroke-width="1.6" marker-end="url(#head)"/>'
     if label:
-        s += f'\n<text x="{(x1 + x2) / 2 + dx}" y="{(y1 + y2) / 2 + dy}" text-anchor="middle" font-size="12" {FONT} fill="#333">{escape(label)}</text>'
+        s += f'\n<text x="{(x1 + x2) / 2 + dx}" y="{(y1 + y2) / 2 + dy}" text-anchor="middle" font-size="14" {FONT} fill="#333">{escape(label)}</text>'
     return s
 
 
@@ -39,20 +39,20 @@ def svg(w, h, body, title):
 def pipeline():
     b = []
     b.append(box(10, 150, 120, 56, ["noise x_T", "~ N(0, I)"]))
-    b.append(box(175, 140, 230, 76, ["reverse diffusion", "ε_θ: bidirectional transformer", "T = 2000 steps (or fewer)"], bold_first=True))
-    b.append(box(450, 140, 200, 76, ["landmark sequence", "x_0 = (L_1, …, L_F)", "F × 68 × 3, mm"], bold_first=True))
-    b.append(box(140, 10, 310, 86, ["conditioning, at sampling time only", "a label (Alg. 1) · a text (Alg. 2)", "known frames (Alg. 3)", "a neutral face (Alg. 4)"], fill="#fdf3e6", stroke="#c9822b", bold_first=True))
-    b.append(arrow(130, 178, 173, 178))
-    b.append(arrow(405, 178, 448, 178))
-    b.append(arrow(290, 96, 290, 138))
-    b.append(box(450, 290, 200, 76, ["spiral encoder-decoder", "with cross-attention", "(the deformer, Eq. 11)"], fill="#eaf6ec", stroke="#3f8f52", bold_first=True))
-    b.append(box(175, 300, 200, 56, ["neutral mesh M", "any face, template topology"], fill="#eaf6ec", stroke="#3f8f52"))
-    b.append(box(700, 290, 190, 76, ["animated mesh", "M_f = M + ΔM_f", "OBJ frames, GIF"], fill="#eaf6ec", stroke="#3f8f52", bold_first=True))
-    b.append(arrow(550, 216, 550, 288, "ΔL_f = L_f − L", dx=58, dy=4))
-    b.append(arrow(375, 328, 448, 328))
-    b.append(arrow(650, 328, 698, 328))
-    b.append(f'<text x="12" y="250" font-size="12" {FONT} fill="#555">trained once, unconditionally, on landmark sequences (chapters 02–03)</text>')
-    b.append(f'<text x="12" y="392" font-size="12" {FONT} fill="#555">trained on meshes (chapter 09); chapter 10 runs the whole pipeline</text>')
+    b.append(box(165, 140, 262, 76, ["reverse diffusion", "ε_θ: bidirectional transformer", "T = 2000 steps (or fewer)"], bold_first=True))
+    b.append(box(467, 140, 200, 76, ["landmark sequence", "x_0 = (L_1, …, L_F)", "F × 68 × 3, mm"], bold_first=True))
+    b.append(box(141, 10, 310, 86, ["conditioning, at sampling time only", "a label (Alg. 1) · a text (Alg. 2)", "known frames (Alg. 3)", "a neutral face (Alg. 4)"], fill="#fdf3e6", stroke="#c9822b", bold_first=True))
+    b.append(arrow(130, 178, 163, 178))
+    b.append(arrow(427, 178, 465, 178))
+    b.append(arrow(296, 96, 296, 138))
+    b.append(box(452, 290, 230, 76, ["spiral encoder-decoder", "with cross-attention", "(the deformer, Eq. 11)"], fill="#eaf6ec", stroke="#3f8f52", bold_first=True))
+    b.append(box(165, 300, 236, 56, ["neutral mesh M", "any face, template topology"], fill="#eaf6ec", stroke="#3f8f52"))
+    b.append(box(720, 290, 172, 76, ["animated mesh", "M_f = M + ΔM_f", "OBJ frames, GIF"], fill="#eaf6ec", stroke="#3f8f52", bold_first=True))
+    b.append(arrow(567, 216, 567, 288, "ΔL_f = L_f − L", dx=62, dy=4))
+    b.append(arrow(401, 328, 450, 328))
+    b.append(arrow(682, 328, 718, 328))
+    b.append(f'<text x="12" y="250" font-size="14" {FONT} fill="#555">trained once, unconditionally, on landmark sequences (chapters 02–03)</text>')
+    b.append(f'<text x="12" y="392" font-size="14" {FONT} fill="#555">trained on meshes (chapter 09); chapter 10 runs the whole pipeline</text>')
     return svg(900, 405, "\n".join(b), "The 4DFM pipeline: a diffusion model of landmark sequences, conditioned at sampling time, then a mesh deformer")
 
 
