@@ -1,4 +1,4 @@
-"""Writes book/_static/pipeline.svg and chapter_map.svg, two diagrams laid out by hand (positions below).
+"""Writes book/_static/pipeline.svg, chapter_map.svg, bit.svg and deformer.svg, diagrams laid out by hand (positions below).
 
 Run ``python book/_static/make_diagrams.py`` after changing a chapter's prerequisites (EDGES) or a title."""
 from html import escape
@@ -97,6 +97,98 @@ def chapter_map():
     return svg(900, 420, "\n".join(b), "Which chapter builds on which: an arrow from a chapter to one that needs it")
 
 
+def bit():
+    """The denoiser eps_theta of models/denoiser.py on the BiT of models/bit.py (DenoiserConfig's sizes)."""
+    b = []
+    cols = [(20, "1"), (180, "2"), (400, "F")]  # x of each frame column (width 140); "…" between 2 and F
+    cw = 140
+    for x, f in cols:
+        b.append(box(x, 20, cw, 48, [f"frame {f} of x_t", "68 × 3 = 204"], size=13))
+        b.append(arrow(x + cw / 2, 68, x + cw / 2, 94))
+        b.append(box(x, 96, cw, 70, [f"token h_{f}", f"FE(frame {f})", f"+ PE({f}) + TE(t)"], size=13, bold_first=True))
+        b.append(arrow(x + cw / 2, 166, x + cw / 2, 198, "128", dx=18, dy=5))
+        b.append(arrow(x + cw / 2, 436, x + cw / 2, 462))
+        b.append(box(x, 464, cw, 64, ["LayerNorm,", "Linear 128 → 204", "starts at zero"], size=13))
+        b.append(arrow(x + cw / 2, 528, x + cw / 2, 556, "BiT", dx=20, dy=5))
+        b.append(arrow(x + cw / 2, 604, x + cw / 2, 630))
+        b.append(box(x, 632, cw, 48, [f"ε_θ, frame {f}", "204 numbers"], size=13, fill="#eaf6ec", stroke="#3f8f52"))
+    for y in (43, 131, 496, 656):
+        b.append(f'<text x="360" y="{y + 5}" text-anchor="middle" font-size="16" {FONT}>…</text>')
+    # the encoder: depth pre-norm layers, self-attention over all frames, then a per-frame feed-forward
+    b.append(box(10, 200, 540, 236, [], fill="#f7f9fd"))
+    b.append(f'<text x="280" y="222" text-anchor="middle" font-size="14" font-weight="bold" {FONT}>4 × transformer encoder layer (depth = 4), pre-norm</text>')
+    b.append(box(22, 234, 516, 122, []))
+    b.append(f'<text x="280" y="254" text-anchor="middle" font-size="13" {FONT}>self-attention: LayerNorm, 4 heads × 32 (width 128), + token</text>')
+    nodes = [x + cw / 2 for x, _ in cols]
+    for i, xa in enumerate(nodes):
+        for xb in nodes[i + 1:]:
+            h = 18 + (xb - xa) * 0.095  # the peak of the arc above its ends
+            o = 0 if (xa, xb) == (nodes[0], nodes[-1]) else 8  # neighbours' arcs end beside the longest one's
+            b.append(f'<path d="M{xa + o},315 Q{(xa + xb) / 2},{315 - 2 * h:.1f} {xb - o},315" fill="none" stroke="#4a6fa5" stroke-width="1.4" marker-start="url(#head)" marker-end="url(#head)"/>')
+    for xn in nodes:
+        b.append(f'<circle cx="{xn}" cy="322" r="5" fill="#4a6fa5"/>')
+    b.append(f'<text x="360" y="327" text-anchor="middle" font-size="16" {FONT}>…</text>')
+    b.append(f'<text x="280" y="345" text-anchor="middle" font-size="13" font-style="italic" {FONT} fill="#333">bidirectional: each frame attends to all frames (no causal mask)</text>')
+    b.append(arrow(280, 356, 280, 374))
+    b.append(box(22, 376, 516, 48, ["feed-forward, per frame: LayerNorm, Linear 128 → 256,", "GELU, Linear 256 → 128, + token"], size=13))
+    # the right-hand column: the step's embedding, the shared maps, the Gaussian estimate
+    b.append(box(590, 20, 290, 48, ["diffusion step t", "one per sequence"], size=13))
+    b.append(arrow(735, 68, 735, 94))
+    b.append(box(590, 96, 290, 70, ["TE(t): sinusoids of t (128), then", "Linear, SiLU, Linear (128 → 128 → 128),", "added to every frame's token"], size=13, fill="#fdf3e6", stroke="#c9822b"))
+    b.append(arrow(590, 131, 542, 131))
+    b.append(box(590, 200, 290, 70, ["FE: one Linear 204 → 128, the", "same for every frame", "PE(f): sinusoids of f = 1, …, F (128)"], size=13, fill="#fdf3e6", stroke="#c9822b"))
+    b.append(box(590, 500, 290, 104, ["ε_Gauss(x_t, t), our addition", "√(1 − ᾱ_t) (ᾱ_t Σ + (1 − ᾱ_t) I)⁻¹ x_t:", "a linear filter of each frame,", "Σ the covariance of training frames"], size=13, fill="#eaf6ec", stroke="#3f8f52", bold_first=True))
+    b.append(arrow(590, 580, 552, 580))
+    b.append(box(10, 558, 540, 46, ["ε_θ(x_t, t) = ε_Gauss(x_t, t) + BiT(TE + PE + FE)"], size=14, fill="#eaf6ec", stroke="#3f8f52", bold_first=True))
+    b.append(f'<text x="590" y="660" font-size="13" {FONT} fill="#555">Each output starts at zero, so training</text>')
+    b.append(f'<text x="590" y="678" font-size="13" {FONT} fill="#555">starts from ε_θ = ε_Gauss.</text>')
+    return svg(900, 696, "\n".join(b), "The denoiser: one token per frame (FE + PE + TE), a bidirectional transformer, a linear output per frame, plus the Gaussian estimate")
+
+
+def deformer():
+    """The deformer of models/deformer.py (DeformerConfig's sizes; levels of the template: 4161, 1073, 285, 80 vertices)."""
+    b = []
+    green = dict(fill="#eaf6ec", stroke="#3f8f52")
+    lx, rx, cw, h = 40, 650, 210, 46
+    enc = [("3 → 16", 0, "4161"), ("16 → 32", 1, "1073"), ("32 → 32", 2, "285"), ("32 → 64", 3, "80"), ("64 → 64", 3, "80")]
+    b.append(box(lx, 20, cw, h, ["neutral mesh M, 4161 × 3", "(M − template) / 10 mm"], size=13, bold_first=True, **green))
+    for k, (ch, lv, v) in enumerate(enc):
+        y = 98 + 78 * k
+        b.append(arrow(lx + cw / 2, y - 32, lx + cw / 2, y - 2, "pool" if k in (1, 2, 3) else None, dx=26, dy=5))
+        b.append(box(lx, y, cw, h, [f"spiral conv {ch}, ELU", f"level {lv}: {v} vertices"], size=13))
+    b.append(arrow(lx + cw / 2, 98 + 78 * 5 - 32, lx + cw / 2, 98 + 78 * 5 - 2))
+    b.append(box(lx, 488, cw, h, ["F_e: 80 × 64", "mesh features"], size=13, bold_first=True, fill="#fdf3e6", stroke="#c9822b"))
+    b.append(f'<text x="22" y="289" transform="rotate(-90 22 289)" text-anchor="middle" font-size="14" font-weight="bold" {FONT}>Encoder (once per face)</text>')
+    dec = [("16 → 3", 0, "4161", ""), ("32 → 16", 1, "1073", ", ELU"), ("32 → 32", 2, "285", ", ELU"),
+           ("64 → 32", 3, "80", ", ELU"), ("64 → 64", 3, "80", ", ELU")]
+    b.append(box(rx, 20, cw, h, ["animated mesh", "M_f = M + ΔM_f"], size=13, bold_first=True, **green))
+    b.append(box(rx, 102, cw, h, ["ΔM_f: 4161 × 3", "× 10 mm"], size=13, bold_first=True, **green))
+    b.append(arrow(rx + cw / 2, 102, rx + cw / 2, 68))
+    for k, (ch, lv, v, act) in enumerate(dec):
+        y = 184 + 82 * k
+        b.append(box(rx, y, cw, h, [f"spiral conv {ch}{act}", f"level {lv}: {v} vertices"], size=13))
+        b.append(arrow(rx + cw / 2, y, rx + cw / 2, y - 34, "unpool" if 1 <= k <= 3 else None, dx=32, dy=5))
+    b.append(box(rx, 594, cw, h, ["Linear 204 → 80 × 64", "the coarse level"], size=13))
+    b.append(arrow(rx + cw / 2, 594, rx + cw / 2, 184 + 82 * 4 + h + 2))
+    b.append(f'<text x="884" y="330" transform="rotate(90 884 330)" text-anchor="middle" font-size="14" font-weight="bold" {FONT}>Decoder (S2D&#8217;s, per frame)</text>')
+    b.append(arrow(lx + cw, 43, rx - 2, 43, "M, added to ΔM_f", dy=-7))
+    # the middle: the motion queries the face (Eq. 11)
+    b.append(box(285, 110, 330, 52, ["landmark displacement ΔL_f = L_f − L", "68 × 3 = 204, / 10 mm, per frame f"], size=13, bold_first=True, fill="#fdf3e6", stroke="#c9822b"))
+    b.append(arrow(430, 162, 430, 248))
+    b.append(box(330, 250, 200, 46, ["FC: Linear 204 → 64", "the query"], size=13))
+    b.append(arrow(430, 296, 430, 458))
+    b.append(box(285, 460, 290, 102, ["cross-attention (Eq. 11)", "softmax(FC(ΔL_f) F_eᵀ / √d) F_e", "keys and values: F_e, d = 64;", "weights over the 80 coarse vertices"], size=13, bold_first=True))
+    b.append(arrow(lx + cw, 511, 283, 511))
+    b.append(arrow(430, 562, 430, 592))
+    b.append(box(285, 594, 330, 46, ["z_id: Linear 64 → 204", "z = κ z_id + ΔL_f (204 values)"], size=13))
+    b.append(arrow(615, 617, rx - 2, 617))
+    b.append('<line x1="595" y1="162" x2="595" y2="592" stroke="#333" stroke-width="1.6" stroke-dasharray="5 3" marker-end="url(#head)"/>')
+    b.append(f'<text x="588" y="222" text-anchor="end" font-size="13" {FONT} fill="#333">skip: + ΔL_f</text>')
+    return svg(900, 660, "\n".join(b), "The landmark-guided deformer: a spiral encoder of the neutral mesh, cross-attention driven by the landmark displacement, z = κ z_id + ΔL_f, and a spiral decoder to the vertex displacements")
+
+
 if __name__ == "__main__":
     (HERE / "pipeline.svg").write_text(pipeline())
     (HERE / "chapter_map.svg").write_text(chapter_map())
+    (HERE / "bit.svg").write_text(bit())
+    (HERE / "deformer.svg").write_text(deformer())
