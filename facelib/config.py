@@ -152,8 +152,8 @@ class DenoiserTraining(Optimisation):
     """The DDPM denoiser eps_theta (§3.1, §4).  Paper §4: 200K iterations, lr 1e-4,
     batch 256.  A CPU budget of about an hour on 2 cores allows about 1/30 of that
     compute: a smaller transformer (models.denoiser.DenoiserConfig), fewer, smaller
-    steps with a higher rate, and an EMA.  Measured against coverage (chapter 03, section 8;
-    results/denoiser_ablation.json), training length decides it."""
+    steps with a higher rate, and an EMA.  Measured against coverage (chapter 03,
+    section 8; results/denoiser_ablation.json), training length decides it."""
 
     # our choice: ~60 min on 2 cores (paper: 200K); coverage 0.43 at 12,000, 0.53 here
     steps: int = 24_000
