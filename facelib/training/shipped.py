@@ -11,9 +11,9 @@ from ..checkpoints import checkpoint_name
 _DEFORMER_METHODS = ("ours", "no_attention", "s2d", "coma", "linear")
 SHIPPED = {
     "denoiser_coma": ("denoiser", {}),
-    # Issue 43 doubled the denoiser's steps (config.DenoiserTraining: 24,000); denoiser_coma is retrained, the
-    # BU, merged and CFG denoisers keep their 12,000 until they are retrained (about an hour each on 2 cores).
-    "denoiser_bu": ("denoiser", {"dataset": "bu", "steps": 12_000}),
+    # Issue 43 doubled the denoiser's steps (config.DenoiserTraining: 24,000); the merged denoiser keeps its 12,000
+    # until it is retrained (about an hour on 2 cores).
+    "denoiser_bu": ("denoiser", {"dataset": "bu"}),
     "denoiser_coma+bu": ("denoiser", {"dataset": "coma+bu", "steps": 12_000}),
     "denoiser_coma_var": ("denoiser", {"num_frames": (35, 45), "steps": 8000}),
     "guide_coma_I": ("guide", {}),
@@ -35,7 +35,7 @@ SHIPPED = {
     **{checkpoint_name("deform", m, s, k): ("deformer", {"method": m, "split": s, "seed": k})
        for m in ("ours", "no_attention", "s2d") for s in ("identity", "expression") for k in (1, 2)},
     # Issue 27: the label-conditional denoiser of classifier-free guidance (tasks.label_control(guidance="cfg")).
-    "denoiser_coma_cfg": ("denoiser", {"conditional": True, "steps": 12_000}),
+    "denoiser_coma_cfg": ("denoiser", {"conditional": True}),
     # Issue 28: the noisy AU-intensity regressor of AU-curve control (the fine-control chapter).
     "au_regressor_coma": ("au_regressor", {}),
 }
