@@ -1,4 +1,4 @@
-"""Command line of the book: ``python -m facelib {data,train,sample,edit,neutral,animate,chapter,results}`` (see ``--help`` of each)."""
+"""Command line of the book: ``python -m facelib {data,train,sample,edit,neutral,animate,register,chapter,results}`` (see ``--help`` of each)."""
 from __future__ import annotations
 
 import argparse
@@ -6,12 +6,15 @@ import ast
 import dataclasses
 import io as bytes_io
 import json
+import os
+import pathlib
 import sys
+import tempfile
 import time
 
 import numpy as np
 
-from . import chapters, cli_sample, config, data, meshio, pipeline, results, training, viz
+from . import chapters, cli_sample, config, data, meshio, pipeline, registration, results, training, viz
 from .face import Face, sample_identity
 
 
@@ -44,11 +47,12 @@ def _data(args):
 TRAINABLE = tuple(training.RECIPES)  # every recipe is trainable
 
 
-def _setting(model_name, assignment):
+def _setting(model_name, assignment, settings_class=None):
     """``--set NAME=VALUE`` as (name, value), the value read as the setting's type ('none': None; tuples and
-    lists as Python literals); a clear error for an unknown name or a value of the wrong type."""
+    lists as Python literals); a clear error for an unknown name or a value of the wrong type.  The settings are
+    the recipe ``model_name``'s, or ``settings_class``'s."""
     name, sep, text = assignment.partition("=")
-    known = {f.name: f for f in dataclasses.fields(training.SETTINGS[model_name])}
+    known = {f.name: f for f in dataclasses.fields(settings_class or training.SETTINGS[model_name])}
     if not sep or name not in known:
         raise ValueError(f"--set {assignment!r}: expected NAME=VALUE with NAME a setting of {model_name} "
                          f"({', '.join(known)})")
@@ -102,28 +106,82 @@ def _neutral(args):
     return 0
 
 
+def _registration_settings(args):
+    """config.Registration with --units and every --set NAME=VALUE of `register` and `animate`."""
+    given = {}
+    for assignment in args.set:
+        name, value = _setting("registration", assignment, config.Registration)
+        if name in given or name == "units":
+            raise ValueError(f"--set {name} repeats a setting given by its own option (--units) or an earlier --set")
+        given[name] = value
+    return dataclasses.replace(config.Registration(), units=args.units, **given)
+
+
 def _animate(args):
     t0 = time.perf_counter()
-    neutral = meshio.read_neutral_mesh(args.mesh)
+    settings = _registration_settings(args)
+    mesh = registration.read_mesh(args.mesh, settings.units)
     seconds = {"read mesh": time.perf_counter() - t0}
     steps = config.GeometryAdaptive().steps if args.steps is None else args.steps
-    meshes, landmarks, stages = pipeline.animate(neutral, args.label, order=args.order, steps=steps, seed=args.seed,
-                                                 progress=True)
-    seconds.update(stages)
+    anim = pipeline.animate_mesh(mesh, args.label, settings, order=args.order, steps=steps, seed=args.seed,
+                                 progress=True)
+    seconds.update(anim.seconds)
     t0 = time.perf_counter()
-    frames = [np.concatenate(pair, axis=1) for pair in zip(viz.mesh_frames(meshes, view="front"),
-                                                           viz.mesh_frames(meshes, view="three_quarter"))]
+    if anim.registration is None:
+        shown, faces, colors = anim.frames, None, None
+    else:  # rendered in the canonical pose, in mm, in one skin colour: the reader's own geometry
+        r, shift = anim.registration.pose
+        shown = anim.frames * registration.UNITS[mesh.units] @ r.T + shift
+        faces, colors = mesh.faces, np.tile(viz.SKIN_RGB, (len(mesh.vertices), 1))
+    frames = [np.concatenate(pair, axis=1)
+              for pair in zip(viz.mesh_frames(shown, view="front", faces=faces, colors=colors),
+                              viz.mesh_frames(shown, view="three_quarter", faces=faces, colors=colors))]
     seconds["render GIF"] = time.perf_counter() - t0
-    used = {"label": args.label, "order": args.order, "steps": steps, "seed": args.seed, "mesh": str(args.mesh)}
+    used = {"label": args.label, "order": args.order, "steps": steps, "seed": args.seed, "mesh": str(args.mesh),
+            "units": mesh.units}
     npz = bytes_io.BytesIO()
-    np.savez(npz, landmarks=landmarks[None].astype(np.float32), config=json.dumps(used))
+    np.savez(npz, landmarks=anim.landmarks[None].astype(np.float32), config=json.dumps(used))
+    extra = {"landmarks.npz": npz.getvalue()}
+    if anim.registration is not None:
+        extra["registration.json"] = _registration_json(anim.registration).encode()
     t0 = time.perf_counter()
-    written = meshio.write_animation(args.out, meshes, viz.gif_bytes(frames, 12),
-                                     extra={"landmarks.npz": npz.getvalue()})
+    written = meshio.write_animation(args.out, anim.frames, viz.gif_bytes(frames, 12), extra=extra, faces=mesh.faces,
+                                     template_meshes=anim.template_frames if args.keep_template else None)
     seconds["write files"] = time.perf_counter() - t0
-    print(f"wrote {len(written)} files to {args.out}: {len(meshes)} OBJ frames, animation.gif, landmarks.npz")
-    print("\n".join(f"  {k:<12} {v:7.2f} s" for k, v in seconds.items()))
-    print(f"  {'total':<12} {sum(seconds.values()):7.2f} s")
+    print(f"wrote {len(written)} files to {args.out}: {len(anim.frames)} OBJ frames of {mesh.source} "
+          f"({len(mesh.vertices)} vertices, {mesh.units}), animation.gif, {', '.join(sorted(extra))}"
+          + (", template/ (the fitted template's frames)" if args.keep_template else ""))
+    print("\n".join(f"  {k:<14} {v:7.2f} s" for k, v in seconds.items()))
+    print(f"  {'total':<14} {sum(seconds.values()):7.2f} s")
+    return 0
+
+
+def _registration_json(fit):
+    """The registration's record: units, the 68 landmarks (user units and pose), residuals (mm), seconds."""
+    return json.dumps({"mesh": fit.mesh.source, "units": fit.mesh.units, "vertices": len(fit.mesh.vertices),
+                       "landmarks": np.round(fit.landmarks, 6).tolist(),
+                       "residual_mm": {k: round(v, 4) for k, v in fit.residual_mm.items()},
+                       "seconds": {k: round(v, 2) for k, v in fit.seconds.items()}}, indent=1) + "\n"
+
+
+def _register(args):
+    out = pathlib.Path(args.out)
+    if out.suffix.lower() != ".obj":
+        raise ValueError(f"--out must name an .obj file, got {out}")
+    settings = _registration_settings(args)
+    mesh = registration.read_mesh(args.mesh, settings.units)
+    fit = registration.register(mesh, settings)
+    record = out.with_suffix(".json")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(dir=out.parent, prefix=f".{out.stem}-") as tmp:
+        meshio.write_obj(pathlib.Path(tmp) / out.name, fit.fitted_in_user_units())
+        (pathlib.Path(tmp) / record.name).write_text(_registration_json(fit))
+        for name in (out.name, record.name):
+            os.replace(pathlib.Path(tmp) / name, out.parent / name)
+    print(f"registered {mesh.source} ({len(mesh.vertices)} vertices, {mesh.units}) in "
+          f"{sum(fit.seconds.values()):.1f} s; residual (median, mm): "
+          + ", ".join(f"{k} {v:.2f}" for k, v in fit.residual_mm.items() if "RMS" not in k))
+    print(f"wrote {out} (the template fitted to it, in its units and pose) and {record} (68 landmarks, residuals)")
     return 0
 
 
@@ -213,7 +271,16 @@ def main(argv=None):
 
     p = sub.add_parser("animate", help="animate a neutral mesh: landmarks, geometry-adaptive generation (Alg. 4), "
                        "deformation (§3.3); writes an OBJ per frame, animation.gif and landmarks.npz")
-    p.add_argument("--mesh", required=True, help="neutral mesh (.obj, ...) with the template topology")
+    p.add_argument("--mesh", required=True, help="a neutral face mesh (OBJ, PLY, STL or OFF) of any topology, units "
+                   "and pose: registered to the template first (see `register`), the frames written on its own "
+                   "vertices; a template mesh in the canonical pose (from `neutral`) is animated as it is")
+    p.add_argument("--units", default=None, choices=list(registration.UNITS), help="the mesh's units (default: "
+                   "detected from its size)")
+    p.add_argument("--keep-template", action="store_true", help="also write the fitted template's frames "
+                   "(template/frame_*.obj, mm, canonical pose)")
+    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="any setting of the "
+                   "registration (config.Registration; repeatable), e.g. --set samples=20000 --set "
+                   "max_residual_mm=4")
     p.add_argument("--label", required=True, help="expression label of the CoMA-like set, e.g. high_smile")
     p.add_argument("--order", default="N2E", choices=["N2E", "E2N"], help="neutral face first (N2E) or last (E2N)")
     p.add_argument("--steps", type=int, default=None, help="reverse steps per pass of Alg. 4 (default: "
@@ -221,6 +288,18 @@ def main(argv=None):
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", required=True, help="output folder (written all at once, or not at all)")
     p.set_defaults(func=_animate)
+
+    p = sub.add_parser("register", help="fit the template to a face mesh of any topology, units and pose (rigid "
+                       "alignment, the identity model, non-rigid ICP); writes the fitted template (OBJ, in the mesh's "
+                       "units and pose) and a JSON with its 68 landmarks and the fit's residuals")
+    p.add_argument("--mesh", required=True, help="a neutral face mesh: OBJ, PLY, STL or OFF")
+    p.add_argument("--units", default=None, choices=list(registration.UNITS), help="the mesh's units (default: "
+                   "detected from its size)")
+    p.add_argument("--out", required=True, help="output .obj (the landmarks and residuals go beside it as .json)")
+    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="any setting of the "
+                   "registration (config.Registration; repeatable), e.g. --set samples=20000 --set "
+                   "max_residual_mm=4")
+    p.set_defaults(func=_register)
 
     p = sub.add_parser("chapter", help="execute one chapter (book mode unless --fast), print its time; the executed "
                        "notebook goes to _build/chapters/ (make chapter N=05)")

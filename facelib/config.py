@@ -720,6 +720,43 @@ class GeometryAdaptive(Sampling):
         return replace(self, steps=10)
 
 
+@dataclass(frozen=True)
+class Registration:
+    """Fitting the template to a reader's own face mesh (facelib/registration.py, the chapter "Your own face")."""
+
+    units: str | None = None  # "mm", "cm" or "m"; None: detected from the mesh's size (FACE_EXTENT_MM)
+    samples: int = 40_000  # our choice: points sampled on the mesh's surface, area-weighted (the fit's target)
+    rigid_iterations: int = 30  # similarity ICP (Umeyama) per start; the PCA axes give 8 starts
+    trim: float = 0.9  # our choice: each ICP step keeps this share of the closest correspondences (holes, extras)
+    model_rounds: int = 30  # our choice: correspondence rounds of the identity-model fit (point to plane)
+    model_steps: int = 3  # our choice: Gauss-Newton evaluations per round (new correspondences converge faster)
+    model_prior: float = 1.0  # weight of the N(0, I) prior on the identity coefficients (a 3DMM's prior)
+    # Non-rigid ICP (Amberg et al. 2007, trimesh.registration.nricp_amberg): (stiffness, landmark weight, normal
+    # weight, iterations) per stage, the stiffness annealed from stiff to supple.  Our choice (the chapter "Your own
+    # face", section 4): stiffer than trimesh's default, since the identity model already brought the template close.
+    stiffness: tuple = ((1.0, 0.0, 1.0, 10), (0.3, 0.0, 1.0, 10), (0.1, 0.0, 1.0, 10), (0.03, 0.0, 0.5, 10))
+    match_distance_mm: float = 10.0  # NRICP ignores correspondences farther than this
+    # Our choice (measured in the chapter "Your own face"): after rigid alignment every face of the truth set is
+    # within 2.5 mm (trimmed RMS), a sphere, a cube, a hand and a plane at 4.5 mm or more.  A worse fit is refused.
+    max_residual_mm: float = 3.5
+    falloff_mm: tuple = (5.0, 40.0)  # motion carried in full within 5 mm of the fitted face, fading out by 40 mm
+
+    def __post_init__(self):
+        if self.units is not None:
+            _check_choice("units", self.units, ("mm", "cm", "m"))
+        _check_positive_int("samples", self.samples)
+        _check_positive_int("rigid_iterations", self.rigid_iterations)
+        _check_positive_int("model_rounds", self.model_rounds)
+        if not 0.5 <= self.trim <= 1.0:
+            raise ValueError(f"trim must be in [0.5, 1], got {self.trim}")
+        near, far = self.falloff_mm
+        if not 0 <= near < far:
+            raise ValueError(f"falloff_mm must be (near, far) with 0 <= near < far, got {self.falloff_mm}")
+
+    def fast(self):
+        return replace(self, samples=20_000, rigid_iterations=15)
+
+
 SAMPLING = {"unconditional": Unconditional(), "label": LabelControl(), "text": TextControl(), "fill": Fill(),
             "geometry": GeometryAdaptive(), "edit": Edit(), "au": AUControl(), "keyframes": Keyframes()}
 

@@ -40,16 +40,17 @@ def read_neutral_mesh(path):
 
 
 def write_obj(path, vertices, faces=None):
-    """One OBJ file of a mesh of the template topology (vertices in mm)."""
+    """One OBJ file of a mesh (by default of the template topology, vertices in mm)."""
     import trimesh
     faces = tpl.get_template().faces if faces is None else faces
     trimesh.Trimesh(np.asarray(vertices, dtype=np.float64), faces, process=False).export(path)
 
 
-def write_animation(out_dir, meshes, gif=None, extra=None):
-    """Write ``frame_000.obj`` ... (one per mesh of (F, V, 3)), ``animation.gif`` (``gif``: its bytes,
-    e.g. from viz.gif_bytes) and ``extra`` {file name: bytes} into ``out_dir``.  Everything is first written to a
-    temporary folder beside it and moved in only when complete, so an error leaves nothing half-way.
+def write_animation(out_dir, meshes, gif=None, extra=None, faces=None, template_meshes=None):
+    """Write ``frame_000.obj`` ... (one per mesh of (F, V, 3), with triangles ``faces``, by default the template's),
+    ``animation.gif`` (``gif``: its bytes, e.g. from viz.gif_bytes), ``extra`` {file name: bytes} and, given
+    ``template_meshes`` (F, V_template, 3), ``template/frame_000.obj`` ... into ``out_dir``.  Everything is first
+    written to a temporary folder beside it and moved in only when complete, so an error leaves nothing half-way.
     Returns the list of written paths."""
     out_dir = Path(out_dir)
     out_dir.parent.mkdir(parents=True, exist_ok=True)
@@ -58,7 +59,11 @@ def write_animation(out_dir, meshes, gif=None, extra=None):
     with tempfile.TemporaryDirectory(dir=out_dir.parent, prefix=f".{out_dir.name}-") as tmp:
         tmp = Path(tmp)
         for f, m in enumerate(meshes):
-            write_obj(tmp / f"frame_{f:0{digits}d}.obj", m)
+            write_obj(tmp / f"frame_{f:0{digits}d}.obj", m, faces)
+        if template_meshes is not None:
+            (tmp / "template").mkdir()
+            for f, m in enumerate(template_meshes):
+                write_obj(tmp / "template" / f"frame_{f:0{digits}d}.obj", m)
         if gif is not None:
             (tmp / "animation.gif").write_bytes(gif)
         for name, content in (extra or {}).items():
@@ -66,6 +71,8 @@ def write_animation(out_dir, meshes, gif=None, extra=None):
         out_dir.mkdir(exist_ok=True)
         written = []
         for p in sorted(tmp.iterdir()):
+            if p.is_dir() and (out_dir / p.name).is_dir():
+                shutil.rmtree(out_dir / p.name)  # a template/ folder of an earlier run
             shutil.move(str(p), out_dir / p.name)
             written.append(out_dir / p.name)
     return written

@@ -46,6 +46,9 @@ def show_source(obj):
     display(Markdown(f"```python\n{inspect.getsource(obj).rstrip()}\n```"))
 
 
+SKIN_RGB = tpl.SKIN  # one colour for a reader's own mesh, which has no albedo
+
+
 class FaceRenderer:
     """Off-screen pyvista renderer with the book's fixed camera and lights.
 
@@ -244,12 +247,13 @@ def reverse_process_frames(trace, reference, points_above=700, figsize=(5.2, 3.2
     return figure_frames(draw, len(steps), figsize=figsize, dpi=dpi)
 
 
-def mesh_frames(meshes, titles=None, size=(240, 300), view="front", **kwargs):
-    """RGB frames of a mesh sequence (F, V, 3), or of several side by side ((S, F, V, 3))."""
+def mesh_frames(meshes, titles=None, size=(240, 300), view="front", faces=None, **kwargs):
+    """RGB frames of a mesh sequence (F, V, 3), or of several side by side ((S, F, V, 3)); ``faces``: the triangles
+    of a mesh that is not the template (then pass ``colors``, e.g. SKIN_RGB per vertex)."""
     meshes = np.asarray(meshes)
     if meshes.ndim == 3:
         meshes = meshes[None]
-    renderer = FaceRenderer(size=size, view=view)
+    renderer = FaceRenderer(size=size, view=view, faces=faces)
     try:
         frames = []
         for f in range(meshes.shape[1]):

@@ -169,9 +169,28 @@ def test_animate_writes_obj_frames_a_gif_and_the_landmarks(tmp_path, face_obj):
         assert json.loads(str(f["config"]))["label"] == "mouth_open"
 
 
+def test_animate_a_mesh_of_another_topology_units_and_pose(tmp_path):
+    """A decimated face in cm, randomly rotated: registered, animated, written on its own vertices and triangles."""
+    from facelib.face import scans
+    scan = scans.make_scan(4547, remeshing="decimated", units="cm")
+    path = tmp_path / "mine.obj"
+    trimesh.Trimesh(scan.vertices, scan.faces, process=False).export(path)
+    out = tmp_path / "anim"
+    assert cli.main(["animate", "--mesh", str(path), "--label", "mouth_open", "--steps", "2", "--keep-template",
+                     "--out", str(out)]) == 0
+    objs = sorted(out.glob("frame_*.obj"))
+    first, last = (trimesh.load(p, process=False, maintain_order=True) for p in (objs[0], objs[-1]))
+    source = trimesh.load(path, process=False, maintain_order=True)
+    np.testing.assert_array_equal(first.faces, source.faces)
+    np.testing.assert_allclose(first.vertices, source.vertices, atol=1e-6)  # frame 0 is the input file
+    assert np.abs(last.vertices - source.vertices).max() * 10 > 1.0  # in cm: the face moves by millimetres
+    assert len(list((out / "template").glob("frame_*.obj"))) == 40
+    assert json.loads((out / "registration.json").read_text())["units"] == "cm"
+
+
 @pytest.mark.parametrize("args, message", [
     (["--label", "wink"], "unknown label"),
-    (["--label", "mouth_open", "--mesh", "SPHERE"], "the template topology has"),
+    (["--label", "mouth_open", "--mesh", "SPHERE"], "has 162 vertices; allowed: 300 to 200,000"),
     (["--label", "mouth_open", "--steps", "0"], "steps must be a positive integer, got 0"),
 ])
 def test_animate_refuses_bad_input_and_writes_nothing(tmp_path, face_obj, capsys, args, message):

@@ -316,6 +316,10 @@ def _landmarks(canonical):
     return np.array(idx, dtype=np.int64)
 
 
+LANDMARK_REGIONS = {"jaw": range(0, 17), "brows": range(17, 27), "nose": range(27, 36), "eyes": range(36, 48),
+                    "mouth": range(48, 68)}  # the iBUG-68 groups
+
+
 def _landmark_mirror(landmark_index):
     """For each landmark i, the landmark j at the mirror vertex of i's (x0 -> -x0): a face mirrored left to
     right, x -> -x, has landmark j where the face had landmark i (iBUG-68: 0 <-> 16, 36 <-> 45, 48 <-> 54, ...)."""

@@ -1,0 +1,315 @@
+"""A reader's own face mesh -> the template fitted onto it, and motion carried back (the chapter "Your own face").
+
+The networks know one mesh: the template (4,161 vertices, canonical pose, millimetres).  A mesh from elsewhere has
+its own vertices, triangles, units and pose, so before it can be animated the template is *registered* to it, in
+three stages of decreasing stiffness:
+
+1. **Rigid alignment with scale** (:func:`rigid_alignment`): the principal axes of the two surfaces give eight
+   starting rotations; from each, ICP with the closed-form similarity of Umeyama (1991) alternates nearest points
+   and the best rotation, scale and translation; the start with the smallest trimmed residual wins.
+2. **The identity model** (:func:`fit_identity`): the world's 14 identity modes, pose and scale fitted by
+   Gauss-Newton on point-to-plane distances with a N(0, I) prior on the modes: what a 3DMM fit (the paper's FLAME
+   fitting, §3.3) does.
+3. **Non-rigid ICP** (Amberg et al. 2007, ``trimesh.registration.nricp_amberg``): a local affine transform per
+   vertex, smoothness weighted by a stiffness that is annealed from stiff to supple, for what the model cannot say.
+
+The 68 landmarks are the fitted template's landmark vertices.  Motion computed on the fitted template is carried to
+the reader's vertices by :meth:`Registration.transfer`: each vertex follows the closest point of the fitted
+template's surface (barycentric interpolation), fading out with its distance from the face.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from scipy.optimize import least_squares
+from scipy.spatial import cKDTree
+from scipy.spatial.transform import Rotation
+
+from . import config
+from .face import identity
+from .face import template as tpl
+from .face.surface import closest_points
+
+UNITS = {"mm": 1.0, "cm": 10.0, "m": 1000.0}  # millimetres per unit
+FACE_EXTENT_MM = (80.0, 500.0)  # the largest side of a face (or head) mesh's bounding box, in mm
+VERTEX_LIMITS = (300, 200_000)
+FACE_SCALE = (0.6, 1.6)  # a face is 0.6-1.6 times the template's size (rigid alignment's scale)
+MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off")
+
+
+@dataclass(frozen=True)
+class UserMesh:
+    """A reader's mesh as read: vertices (V, 3) in its own units and pose, triangles (K, 3), and its units."""
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    units: str
+    source: str = "the mesh"
+
+    @property
+    def mm(self):
+        """The vertices in millimetres (same pose)."""
+        return self.vertices * UNITS[self.units]
+
+
+def _extent(vertices, faces):
+    used = vertices[np.unique(faces)]
+    return float((used.max(0) - used.min(0)).max())
+
+
+def detect_units(extent, units=None, source="the mesh"):
+    """The units ("mm", "cm" or "m") in which a mesh ``extent`` units across is a face (FACE_EXTENT_MM), or
+    ``units`` checked against that size.  A clear error when no unit, or not the given one, makes it a face."""
+    lo, hi = FACE_EXTENT_MM
+    fits = [u for u, mm in UNITS.items() if lo <= extent * mm <= hi]
+    sizes = ", ".join(f"{extent * mm:.4g} mm in {u}" for u, mm in UNITS.items())
+    if units is not None:
+        config._check_choice("units", units, tuple(UNITS))
+        if units not in fits:
+            raise ValueError(f"{source} is {extent:.4g} {units} = {extent * UNITS[units]:.4g} mm across, but a face mesh "
+                             f"is {lo:g}-{hi:g} mm across ({sizes}): --units {units} contradicts its size"
+                             + (f"; it looks like {fits[0]}" if fits else ""))
+        return units
+    if not fits:
+        raise ValueError(f"{source} is {extent:.4g} units across ({sizes}); a face mesh is {lo:g}-{hi:g} mm across in "
+                         f"mm, cm or m: rescale it")
+    return fits[0]
+
+
+def check_mesh(vertices, faces, units=None, source="the mesh"):
+    """A :class:`UserMesh` from vertices (V, 3) and triangles (K, 3), or a clear error naming what is wrong."""
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces)
+    if v.ndim != 2 or v.shape[1] != 3 or len(v) == 0:
+        raise ValueError(f"{source} has no vertices of shape (V, 3) (got {v.shape})")
+    if f.size == 0:
+        raise ValueError(f"{source} has {len(v)} vertices but no triangles: a point cloud cannot be registered; "
+                         f"give a triangle mesh (OBJ, PLY, STL or OFF)")
+    if f.ndim != 2 or f.shape[1] != 3 or not np.issubdtype(f.dtype, np.integer):
+        raise ValueError(f"{source}'s faces must be (K, 3) integer triangles, got {f.dtype} {f.shape}")
+    if f.min() < 0 or f.max() >= len(v):
+        raise ValueError(f"{source}'s triangles index vertices outside 0..{len(v) - 1}")
+    bad = ~np.isfinite(v).all(1)
+    if bad.any():
+        raise ValueError(f"{source} has {int(bad.sum())} vertices with NaN or inf coordinates")
+    lo, hi = VERTEX_LIMITS
+    if not lo <= len(v) <= hi:
+        raise ValueError(f"{source} has {len(v)} vertices; allowed: {lo:,} to {hi:,} (decimate or subdivide it)")
+    units = detect_units(_extent(v, f), units, source)
+    return UserMesh(v, f.astype(np.int64), units, source)
+
+
+def read_mesh(path, units=None):
+    """Read a mesh file (OBJ, PLY, STL or OFF) as a :class:`UserMesh`, vertices and triangles exactly as stored."""
+    import trimesh
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"mesh file {path} does not exist")
+    if path.suffix.lower() not in MESH_SUFFIXES:
+        raise ValueError(f"{path}: unknown mesh format {path.suffix!r}; allowed: {', '.join(MESH_SUFFIXES)}")
+    try:
+        if isinstance(trimesh.load(path, process=False), trimesh.PointCloud):
+            raise ValueError(f"{path} is a point cloud (no triangles), which cannot be registered; give a triangle "
+                             f"mesh (OBJ, PLY, STL or OFF)")
+        mesh = trimesh.load(path, process=False, maintain_order=True, force="mesh")  # a scene's parts, merged
+    except ValueError as e:
+        if "point cloud" in str(e):
+            raise
+        raise ValueError(f"cannot read {path} as a mesh: {e}") from e
+    except Exception as e:  # trimesh raises many types for unreadable files
+        raise ValueError(f"cannot read {path} as a mesh: {e}") from e
+    vertices = np.asarray(getattr(mesh, "vertices", np.zeros((0, 3))))
+    faces = np.asarray(getattr(mesh, "faces", np.zeros((0, 3), dtype=np.int64)))
+    return check_mesh(vertices, faces.reshape(-1, 3), units, source=str(path))
+
+
+def similarity(source, target, scale=True):
+    """(s, R, t) minimising sum |s R source_i + t - target_i|^2 (Umeyama 1991, a proper rotation)."""
+    ms, mt = source.mean(0), target.mean(0)
+    a, b = source - ms, target - mt
+    u, sing, vt = np.linalg.svd(b.T @ a / len(a))
+    d = np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt))])
+    r = u @ d @ vt
+    s = float(np.trace(np.diag(sing) @ d) / ((a ** 2).sum() / len(a))) if scale else 1.0
+    return s, r, mt - s * r @ ms
+
+
+def _principal_axes(points):
+    centre = points.mean(0)
+    var, axes = np.linalg.eigh(np.cov((points - centre).T))
+    axes = axes[:, ::-1].copy()
+    if np.linalg.det(axes) < 0:
+        axes[:, 2] *= -1  # a right-handed frame, so that matching two frames gives a proper rotation
+    return centre, var[::-1], axes
+
+
+def rigid_alignment(points, template_points, settings=config.Registration()):
+    """Scale s, rotation R and translation t that place the template on ``points`` (s R x + t), and the trimmed RMS
+    distance (mm of the template) of that placement: the best of eight starts (the principal axes matched with every
+    proper sign flip, and with the two largest axes swapped), each refined by similarity ICP."""
+    tree = cKDTree(points)
+    cu, var_u, axes_u = _principal_axes(points)
+    ct, var_t, axes_t = _principal_axes(template_points)
+    keep_n = max(3, int(settings.trim * len(template_points)))
+
+    def icp(s, r, t, iterations):
+        for _ in range(iterations):
+            d, j = tree.query(s * template_points @ r.T + t)
+            keep = np.argsort(d)[:keep_n]
+            s, r, t = similarity(template_points[keep], points[j[keep]])
+        d, _ = tree.query(s * template_points @ r.T + t)
+        return s, r, t, float(np.sqrt(np.mean(np.sort(d)[:keep_n] ** 2)) / s)
+
+    starts = []
+    for swap in (False, True):
+        target_axes = axes_t[:, [1, 0, 2]] * [1.0, 1.0, -1.0] if swap else axes_t
+        for signs in ((1, 1, 1), (1, -1, -1), (-1, 1, -1), (-1, -1, 1)):
+            r = axes_u @ np.diag(signs) @ target_axes.T
+            s = float(np.sqrt(var_u.sum() / var_t.sum()))
+            # A third of the iterations from every start, the rest from the best one.
+            starts.append(icp(s, r, cu - s * r @ ct, settings.rigid_iterations // 3))
+    s, r, t, _ = min(starts, key=lambda start: start[3])
+    return icp(s, r, t, settings.rigid_iterations - settings.rigid_iterations // 3)
+
+
+def fit_identity(points, normals, pose, settings=config.Registration()):
+    """The world's identity model fitted to ``points`` (with their surface ``normals``) from ``pose`` = (s, R, t):
+    minimises sum_i (n_j . (x_i - p_j))^2 + 0.04 |x_i - p_j|^2 + prior |c|^2 over the 14 identity coefficients c,
+    the rotation, translation and log-scale, with p_j the nearest point to the model's vertex x_i (re-found every
+    round, the farthest 1 - trim ignored).  Returns (vertices (V, 3) placed on the points, coefficients, residual mm)."""
+    tree = cKDTree(points)
+    s, r, t = pose
+    n = identity.NUM_MODES
+    x0 = np.concatenate([np.zeros(n), Rotation.from_matrix(r).as_rotvec(), t, [np.log(s)]])
+
+    def model(x):
+        rot = Rotation.from_rotvec(x[n:n + 3]).as_matrix()
+        return np.exp(x[-1]) * identity.neutral_vertices(x[:n]) @ rot.T + x[n + 3:n + 6]
+
+    keep_n = max(3, int(settings.trim * tpl.get_template().num_vertices))
+    for _ in range(settings.model_rounds):
+        d, j = tree.query(model(x0))
+        keep = np.argsort(d)[:keep_n]
+        target, normal = points[j[keep]], normals[j[keep]]
+
+        def residuals(x):
+            dx = model(x)[keep] - target
+            return np.concatenate([(dx * normal).sum(1), 0.2 * dx.ravel(), settings.model_prior * x[:n]])
+        x0 = least_squares(residuals, x0, max_nfev=settings.model_steps, diff_step=1e-4).x
+    vertices = model(x0)
+    d, _ = tree.query(vertices)
+    return vertices, x0[:n], float(np.sqrt(np.mean(np.sort(d)[:keep_n] ** 2)))
+
+
+def nonrigid(vertices, points, settings=config.Registration()):
+    """Non-rigid ICP (Amberg et al. 2007) of the template's triangles at ``vertices`` onto ``points``, with the
+    stiffness schedule of ``settings`` (trimesh.registration.nricp_amberg)."""
+    import trimesh
+    source = trimesh.Trimesh(vertices, tpl.get_template().faces, process=False)
+    return np.asarray(trimesh.registration.nricp_amberg(
+        source, points, steps=[list(s) for s in settings.stiffness], distance_threshold=settings.match_distance_mm,
+        use_faces=False))
+
+
+def _vertex_regions():
+    """Each template vertex's landmark region (LANDMARK_REGIONS) by its nearest landmark in canonical coordinates,
+    or "skin" farther than 12 mm from every landmark."""
+    t = tpl.get_template()
+    d, j = cKDTree(t.canonical[t.landmark_index]).query(t.canonical)
+    names = np.array([next(k for k, r in tpl.LANDMARK_REGIONS.items() if i in r) for i in j], dtype=object)
+    names[d > 12.0] = "skin"
+    return names
+
+
+@dataclass
+class Registration:
+    """The template fitted onto a :class:`UserMesh`, and the map that carries motion back to the user's vertices.
+
+    ``fitted`` is the template (V, 3) on the user's face in mm and the user's pose; ``pose`` = (R, t) takes it to the
+    canonical pose of the networks (``neutral`` = fitted R^T + t, as rows).  ``residual_mm``: per region, the median
+    distance from the fitted template's vertices to the user's surface."""
+
+    mesh: UserMesh
+    fitted: np.ndarray
+    pose: tuple
+    residual_mm: dict
+    seconds: dict
+    correspondence: tuple = field(repr=False)  # (triangle, barycentric, distance mm) of each user vertex
+    stages: dict = field(default_factory=dict, repr=False)  # the template after each stage (V, 3), user mm and pose
+    settings: config.Registration = config.Registration()
+
+    @property
+    def neutral(self):
+        """The fitted template in the canonical pose (mm): the neutral mesh that the networks animate."""
+        r, t = self.pose
+        return (self.fitted @ r.T + t).astype(np.float32)
+
+    @property
+    def landmarks(self):
+        """The 68 landmarks (68, 3) in the user's units and pose."""
+        return self.fitted[tpl.get_template().landmark_index] / UNITS[self.mesh.units]
+
+    def fitted_in_user_units(self):
+        return self.fitted / UNITS[self.mesh.units]
+
+    def transfer(self, frames):
+        """Carry template-topology frames (F, V, 3) in the canonical pose (mm) to the user's mesh: (F, V_user, 3) in
+        the user's units and pose.  Each user vertex moves by the motion (frame - frame 0) at its closest point of the
+        fitted template, in full within falloff_mm[0] of it and fading smoothly to none at falloff_mm[1], so frame 0
+        is the user's mesh exactly and the back of a head does not tear away from the face."""
+        frames = np.asarray(frames, dtype=np.float64)
+        if frames.ndim != 3 or frames.shape[1:] != (tpl.get_template().num_vertices, 3):
+            raise ValueError(f"frames must be (F, {tpl.get_template().num_vertices}, 3) template meshes, "
+                             f"got {frames.shape}")
+        tri, bary, dist = self.correspondence
+        corners = tpl.get_template().faces[tri]  # (Vu, 3)
+        motion = frames - frames[:1]
+        moved = np.einsum("uk,fukd->fud", bary, motion[:, corners])
+        near, far = self.settings.falloff_mm
+        weight = np.clip((far - dist) / (far - near), 0.0, 1.0)
+        weight = weight * weight * (3 - 2 * weight)  # smoothstep: no crease where the fading starts or ends
+        r, _ = self.pose
+        moved_user = (moved * weight[None, :, None]) @ r  # canonical -> the user's pose (R^T on column vectors)
+        return self.mesh.vertices[None] + moved_user / UNITS[self.mesh.units]
+
+
+def register(mesh, settings=config.Registration()):
+    """Fit the template onto ``mesh`` (a :class:`UserMesh`): rigid alignment, the identity model, non-rigid ICP.
+    Refuses a mesh that is not a face (the fit's residual over settings.max_residual_mm) with that residual."""
+    import trimesh
+    seconds = {}
+    t = tpl.get_template()
+    tm = trimesh.Trimesh(mesh.mm, mesh.faces, process=False)
+    if tm.area <= 0:
+        raise ValueError(f"{mesh.source} has no surface area (every triangle is degenerate)")
+    t0 = time.perf_counter()
+    points, face_index = trimesh.sample.sample_surface(tm, settings.samples, seed=0)
+    normals = tm.face_normals[face_index]
+    s, r, tr, rigid_residual = rigid_alignment(points, t.vertices, settings)
+    seconds["rigid"] = time.perf_counter() - t0
+    lo, hi = FACE_SCALE
+    if rigid_residual > settings.max_residual_mm or not lo <= s <= hi:
+        raise ValueError(f"{mesh.source} does not look like a face: the best rigid placement of the template leaves "
+                         f"a residual of {rigid_residual:.2f} mm at {s:.2f} times its size; a face fits within "
+                         f"{settings.max_residual_mm:g} mm at {lo:g}-{hi:g} times the template's size")
+    t0 = time.perf_counter()
+    model_fit, _, model_residual = fit_identity(points, normals, (s, r, tr), settings)
+    seconds["identity model"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    fitted = nonrigid(model_fit, points, settings)
+    seconds["non-rigid"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    _, rot, trans = similarity(fitted, t.vertices, scale=False)
+    _, _, dist = closest_points(mesh.mm, mesh.faces, fitted)
+    regions = _vertex_regions()
+    residual = {"all": float(np.median(dist)), "rigid (trimmed RMS)": rigid_residual,
+                "identity model (trimmed RMS)": model_residual}
+    residual.update({k: float(np.median(dist[regions == k])) for k in (*tpl.LANDMARK_REGIONS, "skin")})
+    canonical_user = mesh.mm @ rot.T + trans
+    correspondence = closest_points(fitted @ rot.T + trans, t.faces, canonical_user)
+    seconds["correspondence"] = time.perf_counter() - t0
+    stages = {"rigid": s * t.vertices @ r.T + tr, "identity model": model_fit, "non-rigid": fitted}
+    return Registration(mesh, fitted, (rot, trans), residual, seconds, correspondence, stages, settings)
