@@ -96,15 +96,10 @@ def face_row(case, kwargs, faces, settings):
 def refusal_row(name, vertices, faces, settings):
     mesh = registration.check_mesh(vertices, faces, units="mm")
     t0 = time.perf_counter()
-    refused, residual = False, None
     try:
-        reg = registration.register(mesh, settings)
-        residual = reg.residual_mm["rigid (trimmed RMS)"]
-    except ValueError as e:
-        refused = "does not look like a face" in str(e)
-        if not refused:
-            raise
-        residual = float(str(e).split("residual of ")[1].split(" mm")[0])
+        refused, residual = False, registration.register(mesh, settings).residual_mm["rigid (trimmed RMS)"]
+    except registration.NotAFaceError as e:
+        refused, residual = True, e.residual_mm
     return [f"not a face: {name}", len(vertices), "mm", *[None] * (len(COLUMNS) - 6), time.perf_counter() - t0,
             residual, refused]
 

@@ -129,10 +129,10 @@ def _animate(args):
     t0 = time.perf_counter()
     if anim.registration is None:
         shown, faces, colors = anim.frames, None, None
-    else:  # rendered in the canonical pose, in mm, in one skin colour: the reader's own geometry
+    else:  # rendered in the canonical pose, in mm, with the template's colours carried over
         r, shift = anim.registration.pose
         shown = anim.frames * registration.UNITS[mesh.units] @ r.T + shift
-        faces, colors = mesh.faces, np.tile(viz.SKIN_RGB, (len(mesh.vertices), 1))
+        faces, colors = mesh.faces, anim.registration.colors()
     frames = [np.concatenate(pair, axis=1)
               for pair in zip(viz.mesh_frames(shown, view="front", faces=faces, colors=colors),
                               viz.mesh_frames(shown, view="three_quarter", faces=faces, colors=colors))]

@@ -40,6 +40,15 @@ FACE_SCALE = (0.6, 1.6)  # a face is 0.6-1.6 times the template's size (rigid al
 MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off")
 
 
+class NotAFaceError(ValueError):
+    """A mesh that the template cannot be placed on closely: ``residual_mm`` (trimmed RMS after rigid
+    alignment, mm of the template) and ``scale`` (the template's scale factor) say how far it is from a face."""
+
+    def __init__(self, message, residual_mm, scale):
+        super().__init__(message)
+        self.residual_mm, self.scale = residual_mm, scale
+
+
 @dataclass(frozen=True)
 class UserMesh:
     """A reader's mesh as read: vertices (V, 3) in its own units and pose, triangles (K, 3), and its units."""
@@ -69,9 +78,9 @@ def detect_units(extent, units=None, source="the mesh"):
     if units is not None:
         config._check_choice("units", units, tuple(UNITS))
         if units not in fits:
-            raise ValueError(f"{source} is {extent:.4g} {units} = {extent * UNITS[units]:.4g} mm across, but a face mesh "
-                             f"is {lo:g}-{hi:g} mm across ({sizes}): --units {units} contradicts its size"
-                             + (f"; it looks like {fits[0]}" if fits else ""))
+            raise ValueError(f"{source} is {extent:.4g} units across, {extent * UNITS[units]:.4g} mm if they are {units}, "
+                             f"but a face mesh is {lo:g}-{hi:g} mm across: --units {units} contradicts its size"
+                             + (f"; it looks like {fits[0]}" if fits else f" ({sizes})"))
         return units
     if not fits:
         raise ValueError(f"{source} is {extent:.4g} units across ({sizes}); a face mesh is {lo:g}-{hi:g} mm across in "
@@ -127,10 +136,11 @@ def read_mesh(path, units=None):
 
 
 def similarity(source, target, scale=True):
-    """(s, R, t) minimising sum |s R source_i + t - target_i|^2 (Umeyama 1991, a proper rotation)."""
+    """(s, R, t) minimising sum |s R source_i + t - target_i|^2: Umeyama (1991),
+    R a proper rotation (no reflection), s = 1 unless ``scale``."""
     ms, mt = source.mean(0), target.mean(0)
     a, b = source - ms, target - mt
-    u, sing, vt = np.linalg.svd(b.T @ a / len(a))
+    u, sing, vt = np.linalg.svd(b.T @ a / len(a))  # the cross-covariance
     d = np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt))])
     r = u @ d @ vt
     s = float(np.trace(np.diag(sing) @ d) / ((a ** 2).sum() / len(a))) if scale else 1.0
@@ -252,33 +262,42 @@ class Registration:
         """The 68 landmarks (68, 3) in the user's units and pose."""
         return self.fitted[tpl.get_template().landmark_index] / UNITS[self.mesh.units]
 
+    def colors(self):
+        """The template's albedo (V_user, 3) at each user vertex's closest point of the fitted template
+        (lips, brows, the mouth interior): for renders of the user's mesh."""
+        tri, bary, _ = self.correspondence
+        return np.einsum("uk,ukc->uc", bary, tpl.get_template().colors[tpl.get_template().faces[tri]])
+
     def fitted_in_user_units(self):
         return self.fitted / UNITS[self.mesh.units]
 
     def transfer(self, frames):
-        """Carry template-topology frames (F, V, 3) in the canonical pose (mm) to the user's mesh: (F, V_user, 3) in
-        the user's units and pose.  Each user vertex moves by the motion (frame - frame 0) at its closest point of the
-        fitted template, in full within falloff_mm[0] of it and fading smoothly to none at falloff_mm[1], so frame 0
-        is the user's mesh exactly and the back of a head does not tear away from the face."""
+        """Carry template frames (F, V, 3), canonical pose and mm, to the user's mesh:
+        (F, V_user, 3) in the user's units and pose.  Each user vertex moves by the
+        motion (frame - frame 0) at its closest point of the fitted template, in full
+        within falloff_mm[0] of it and fading smoothly to none at falloff_mm[1]: frame
+        0 is the user's mesh exactly, and the back of a head does not tear away."""
         frames = np.asarray(frames, dtype=np.float64)
-        if frames.ndim != 3 or frames.shape[1:] != (tpl.get_template().num_vertices, 3):
-            raise ValueError(f"frames must be (F, {tpl.get_template().num_vertices}, 3) template meshes, "
+        expected = (tpl.get_template().num_vertices, 3)
+        if frames.ndim != 3 or frames.shape[1:] != expected:
+            raise ValueError(f"frames must be (F, {expected[0]}, 3) template meshes, "
                              f"got {frames.shape}")
         tri, bary, dist = self.correspondence
-        corners = tpl.get_template().faces[tri]  # (Vu, 3)
+        corners = tpl.get_template().faces[tri]  # (V_user, 3)
         motion = frames - frames[:1]
         moved = np.einsum("uk,fukd->fud", bary, motion[:, corners])
         near, far = self.settings.falloff_mm
         weight = np.clip((far - dist) / (far - near), 0.0, 1.0)
-        weight = weight * weight * (3 - 2 * weight)  # smoothstep: no crease where the fading starts or ends
+        weight = weight * weight * (3 - 2 * weight)  # smoothstep: no crease
         r, _ = self.pose
-        moved_user = (moved * weight[None, :, None]) @ r  # canonical -> the user's pose (R^T on column vectors)
-        return self.mesh.vertices[None] + moved_user / UNITS[self.mesh.units]
+        moved = (moved * weight[None, :, None]) @ r  # canonical -> the user's pose
+        return self.mesh.vertices[None] + moved / UNITS[self.mesh.units]
 
 
 def register(mesh, settings=config.Registration()):
     """Fit the template onto ``mesh`` (a :class:`UserMesh`): rigid alignment, the identity model, non-rigid ICP.
-    Refuses a mesh that is not a face (the fit's residual over settings.max_residual_mm) with that residual."""
+    Refuses a mesh that is not a face (:class:`NotAFaceError`: the rigid residual over settings.max_residual_mm, or
+    a scale outside FACE_SCALE) with that residual."""
     import trimesh
     seconds = {}
     t = tpl.get_template()
@@ -292,9 +311,10 @@ def register(mesh, settings=config.Registration()):
     seconds["rigid"] = time.perf_counter() - t0
     lo, hi = FACE_SCALE
     if rigid_residual > settings.max_residual_mm or not lo <= s <= hi:
-        raise ValueError(f"{mesh.source} does not look like a face: the best rigid placement of the template leaves "
-                         f"a residual of {rigid_residual:.2f} mm at {s:.2f} times its size; a face fits within "
-                         f"{settings.max_residual_mm:g} mm at {lo:g}-{hi:g} times the template's size")
+        raise NotAFaceError(f"{mesh.source} does not look like a face: the best rigid placement of the template "
+                            f"leaves a residual of {rigid_residual:.2f} mm at {s:.2f} times its size; a face fits "
+                            f"within {settings.max_residual_mm:g} mm at {lo:g}-{hi:g} times the template's size",
+                            rigid_residual, s)
     t0 = time.perf_counter()
     model_fit, _, model_residual = fit_identity(points, normals, (s, r, tr), settings)
     seconds["identity model"] = time.perf_counter() - t0

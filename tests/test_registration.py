@@ -126,8 +126,9 @@ def test_transfer_keeps_frame_0_and_carries_the_true_motion(scan_fit):
 @pytest.mark.parametrize("name", ["sphere", "plane"])
 def test_a_mesh_that_is_not_a_face_is_refused_with_its_residual(name):
     v, f = scans.not_faces()[name]
-    with pytest.raises(ValueError, match=r"does not look like a face: .* residual of \d+\.\d\d mm"):
+    with pytest.raises(reg.NotAFaceError, match=r"does not look like a face: .* residual of \d+\.\d\d mm") as e:
         reg.register(reg.check_mesh(v, f), config.Registration().fast())
+    assert e.value.residual_mm > config.Registration().max_residual_mm
 
 
 def test_register_command_writes_the_fit_and_landmarks_or_nothing(tmp_path, capsys):

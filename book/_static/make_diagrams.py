@@ -70,10 +70,12 @@ CHAPTERS = {  # id: (title lines, part colour, x, y)
     "a1": (["A1 Hearing the order", "and new words"], 6, 740, 10),
     "12": (["12 Fine control:", "AUs and keyframes"], 5, 740, 130),
     "10": (["10 End to end"], 4, 740, 290),
+    "13": (["13 Your own face:", "registration"], 5, 740, 380),
 }
 EDGES = [("01", "03"), ("02", "03"), ("01", "04"), ("03", "05"), ("04", "05"), ("05", "06"), ("03", "07"),
          ("04", "07"), ("05", "08"), ("07", "08"), ("01", "09"), ("08", "10"), ("09", "10"), ("05", "11"),
-         ("08", "12"), ("11", "12"), ("06", "a1")]
+         ("08", "12"), ("11", "12"), ("06", "a1"), ("09", "13"),
+         ("10", "13")]
 PARTS = [("Foundations", "#f2f2f2", "#777"), ("The diffusion model", "#eef3fb", "#4a6fa5"),
          ("Measuring a generator", "#f5eefa", "#8a5aa8"), ("Conditioning the reverse process", "#fdf3e6", "#c9822b"),
          ("From landmarks to meshes", "#eaf6ec", "#3f8f52"), ("Beyond the paper", "#fbecec", "#b24a4a"),
@@ -84,6 +86,10 @@ W, H = 150, 62
 def chapter_map():
     b = []
     for a, c in EDGES:
+        if CHAPTERS[a][2] == CHAPTERS[c][2]:  # one above the other: straight down
+            x = CHAPTERS[a][2] + W / 2
+            b.append(arrow(x, CHAPTERS[a][3] + H, x, CHAPTERS[c][3] - 2))
+            continue
         xa, ya = CHAPTERS[a][2] + W, CHAPTERS[a][3] + H / 2
         xc, yc = CHAPTERS[c][2], CHAPTERS[c][3] + H / 2
         b.append(f'<path d="M{xa},{ya} C{xa + 18},{ya} {xc - 18},{yc} {xc - 2},{yc}" fill="none" stroke="#555" stroke-width="1.4" marker-end="url(#head)"/>')
@@ -91,10 +97,10 @@ def chapter_map():
         _, fill, stroke = PARTS[part]
         b.append(box(x, y, W, H, lines, fill=fill, stroke=stroke, size=12))
     for k, (name, fill, stroke) in enumerate(PARTS):
-        lx, ly = 20 + 220 * (k % 4), 378 + 20 * (k // 4)
+        lx, ly = 20 + 220 * (k % 3), 400 + 20 * (k // 3)
         b.append(f'<rect x="{lx}" y="{ly}" width="14" height="14" rx="3" fill="{fill}" stroke="{stroke}"/>')
         b.append(f'<text x="{lx + 19}" y="{ly + 11}" font-size="11" {FONT}>{escape(name)}</text>')
-    return svg(900, 420, "\n".join(b), "Which chapter builds on which: an arrow from a chapter to one that needs it")
+    return svg(900, 470, "\n".join(b), "Which chapter builds on which: an arrow from a chapter to one that needs it")
 
 
 def bit():
