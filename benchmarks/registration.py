@@ -3,9 +3,9 @@
 Usage: python benchmarks/registration.py [--faces 6] [--save NAME]
 
 For each case (facelib/face/scans.py: subdivided, decimated to about 2k vertices in cm, remeshed to about 20k in m,
-with 0.3 mm noise, with 3 holes, with two eyeballs as extra components, and a face outside the identity model), the
-faces of ``--faces`` identities that no dataset holds are registered (facelib/registration.py, the book's settings)
-and measured against their truth:
+with 0.3 mm noise, with 3 holes, with two eyeballs as extra components, and a face outside the identity model),
+the faces of ``--faces`` identities that no dataset holds are registered (facelib/registration.py, the book's
+settings) and measured against their truth:
 
 * landmark error (mm): the fitted template's 68 landmarks against the true ones, pooled over the faces: median,
   95th percentile, the median per region, and the median after the rigid and the identity-model stages;
@@ -20,7 +20,7 @@ were refused.
 
     python benchmarks/registration.py --save registration_truth
 
-(7 cases x 6 faces: about 10 minutes on one core.)
+(7 cases x 6 faces: about 15 minutes on one core beside other jobs.)
 """
 import argparse
 import time

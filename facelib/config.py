@@ -726,7 +726,7 @@ class Registration:
 
     units: str | None = None  # "mm", "cm" or "m"; None: detected from the mesh's size (FACE_EXTENT_MM)
     samples: int = 40_000  # our choice: points sampled on the mesh's surface, area-weighted (the fit's target)
-    rigid_iterations: int = 30  # similarity ICP (Umeyama) per start; the PCA axes give 8 starts
+    rigid_iterations: int = 30  # similarity ICP (Umeyama): a third from each of 24 starts, the rest from the best
     trim: float = 0.9  # our choice: each ICP step keeps this share of the closest correspondences (holes, extras)
     model_rounds: int = 30  # our choice: correspondence rounds of the identity-model fit (point to plane)
     model_steps: int = 3  # our choice: Gauss-Newton evaluations per round (new correspondences converge faster)

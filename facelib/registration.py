@@ -4,7 +4,7 @@ The networks know one mesh: the template (4,161 vertices, canonical pose, millim
 its own vertices, triangles, units and pose, so before it can be animated the template is *registered* to it, in
 three stages of decreasing stiffness:
 
-1. **Rigid alignment with scale** (:func:`rigid_alignment`): the principal axes of the two surfaces give eight
+1. **Rigid alignment with scale** (:func:`rigid_alignment`): the principal axes of the two surfaces give 24
    starting rotations; from each, ICP with the closed-form similarity of Umeyama (1991) alternates nearest points
    and the best rotation, scale and translation; the start with the smallest trimmed residual wins.
 2. **The identity model** (:func:`fit_identity`): the world's 14 identity modes, pose and scale fitted by
@@ -103,7 +103,8 @@ def check_mesh(vertices, faces, units=None, source="the mesh"):
         raise ValueError(f"{source}'s triangles index vertices outside 0..{len(v) - 1}")
     bad = ~np.isfinite(v).all(1)
     if bad.any():
-        raise ValueError(f"{source} has {int(bad.sum())} vertices with NaN or inf coordinates")
+        n = int(bad.sum())
+        raise ValueError(f"{source} has {n} {'vertex' if n == 1 else 'vertices'} with NaN or inf coordinates")
     lo, hi = VERTEX_LIMITS
     if not lo <= len(v) <= hi:
         raise ValueError(f"{source} has {len(v)} vertices; allowed: {lo:,} to {hi:,} (decimate or subdivide it)")
@@ -156,33 +157,47 @@ def _principal_axes(points):
     return centre, var[::-1], axes
 
 
+def _axis_matches():
+    """The 24 rotations that map the coordinate axes onto themselves (signed permutation matrices, det 1):
+    every way of matching the principal axes of two surfaces."""
+    import itertools
+    found = []
+    for perm in itertools.permutations(range(3)):
+        for signs in itertools.product((1.0, -1.0), repeat=3):
+            m = np.zeros((3, 3))
+            m[list(range(3)), list(perm)] = signs
+            if np.linalg.det(m) > 0:
+                found.append(m)
+    return tuple(found)
+
+
+AXIS_MATCHES = _axis_matches()
+
+
 def rigid_alignment(points, template_points, settings=config.Registration()):
     """Scale s, rotation R and translation t that place the template on ``points`` (s R x + t), and the trimmed RMS
-    distance (mm of the template) of that placement: the best of eight starts (the principal axes matched with every
-    proper sign flip, and with the two largest axes swapped), each refined by similarity ICP."""
+    distance (mm of the template) of that placement: the best of 24 starts (the principal axes of the two surfaces
+    matched in every order and direction that is a rotation, AXIS_MATCHES), each refined by similarity ICP."""
     tree = cKDTree(points)
     cu, var_u, axes_u = _principal_axes(points)
     ct, var_t, axes_t = _principal_axes(template_points)
-    keep_n = max(3, int(settings.trim * len(template_points)))
-
-    def icp(s, r, t, iterations):
+    def icp(x, s, r, t, iterations):
+        keep_n = max(3, int(settings.trim * len(x)))
         for _ in range(iterations):
-            d, j = tree.query(s * template_points @ r.T + t)
+            d, j = tree.query(s * x @ r.T + t)
             keep = np.argsort(d)[:keep_n]
-            s, r, t = similarity(template_points[keep], points[j[keep]])
-        d, _ = tree.query(s * template_points @ r.T + t)
+            s, r, t = similarity(x[keep], points[j[keep]])
+        d, _ = tree.query(s * x @ r.T + t)
         return s, r, t, float(np.sqrt(np.mean(np.sort(d)[:keep_n] ** 2)) / s)
 
-    starts = []
-    for swap in (False, True):
-        target_axes = axes_t[:, [1, 0, 2]] * [1.0, 1.0, -1.0] if swap else axes_t
-        for signs in ((1, 1, 1), (1, -1, -1), (-1, 1, -1), (-1, -1, 1)):
-            r = axes_u @ np.diag(signs) @ target_axes.T
-            s = float(np.sqrt(var_u.sum() / var_t.sum()))
-            # A third of the iterations from every start, the rest from the best one.
-            starts.append(icp(s, r, cu - s * r @ ct, settings.rigid_iterations // 3))
+    # A third of the iterations from every start with every 8th template point, the rest from the best start
+    # with all of them.
+    coarse = template_points[::8]
+    s = 1.0  # the mesh is in mm by now, and faces are about the template's size (FACE_SCALE)
+    starts = [icp(coarse, s, axes_u @ m @ axes_t.T, cu - s * axes_u @ m @ axes_t.T @ ct, settings.rigid_iterations // 3)
+              for m in AXIS_MATCHES]
     s, r, t, _ = min(starts, key=lambda start: start[3])
-    return icp(s, r, t, settings.rigid_iterations - settings.rigid_iterations // 3)
+    return icp(template_points, s, r, t, settings.rigid_iterations - settings.rigid_iterations // 3)
 
 
 def fit_identity(points, normals, pose, settings=config.Registration()):

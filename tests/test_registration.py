@@ -67,7 +67,7 @@ def test_bad_meshes_are_refused_with_what_is_allowed(tmp_path):
         reg.check_mesh(np.zeros((0, 3)), T.faces)
     bad = face.copy()
     bad[7] = np.nan
-    with pytest.raises(ValueError, match="1 vertices with NaN or inf"):
+    with pytest.raises(ValueError, match="1 vertex with NaN or inf"):
         reg.check_mesh(bad, T.faces)
     with pytest.raises(ValueError, match="index vertices outside"):
         reg.check_mesh(face, T.faces + 5000)

@@ -74,6 +74,18 @@ def eyeballs(neutral, radius=12.0):
     return parts
 
 
+def back_of_head(neutral):
+    """The back half of an ellipsoid behind a neutral face (a separate component, as a head scan's skull and
+    hair would be): (vertices, faces)."""
+    import trimesh
+    sphere = trimesh.creation.icosphere(subdivisions=3, radius=95.0)
+    centre = np.array([0.0, 10.0, neutral[:, 2].min() - 20.0])
+    v = sphere.vertices * [0.85, 1.1, 1.0] + centre
+    back = v[:, 2] < centre[2] + 30.0
+    v, f, _ = drop_unused(v, sphere.faces[back[sphere.faces].all(1)])
+    return v, f
+
+
 def append(vertices, faces, parts):
     """The mesh with extra components appended (each part keeps its own triangles)."""
     for v, f in parts:
@@ -116,10 +128,11 @@ class Scan:
     template_motion: dict
 
 
-def make_scan(seed, remeshing="remeshed", units="mm", noise_mm=0.0, holes=0, extra=False, out_of_model=False,
-              labels=("high_smile", "mouth_open", "eyebrow"), name=None):
+def make_scan(seed, remeshing="remeshed", units="mm", noise_mm=0.0, holes=0, extra=False, head=False,
+              out_of_model=False, labels=("high_smile", "mouth_open", "eyebrow"), name=None):
     """A :class:`Scan` of the unseen identity drawn from ``seed`` (the datasets draw theirs from other seeds), in a
     random pose (a uniformly random rotation, a translation of up to 300 mm), re-triangulated by ``remeshing``.
+    ``extra``: two eyeballs as separate components; ``head``: the back of a head behind the face (back_of_head).
     ``out_of_model``: identity coefficients 1.5 times as large and a smooth bump field added, a face the identity
     model cannot fit exactly.  ``labels``: the expressions whose true motion is recorded."""
     rng = np.random.default_rng([seed, 45])
@@ -144,8 +157,8 @@ def make_scan(seed, remeshing="remeshed", units="mm", noise_mm=0.0, holes=0, ext
         v, f, kept = cut_holes(v, f, v[rng.choice(np.flatnonzero(far), holes, replace=False)], 8.0)
         vertex_motion = {k: m[kept] for k, m in vertex_motion.items()}
     is_face = np.ones(len(v), bool)
-    if extra:
-        parts = eyeballs(neutral)
+    if extra or head:
+        parts = (eyeballs(neutral) if extra else []) + ([back_of_head(neutral)] if head else [])
         n_before = len(v)
         v, f = append(v, f, parts)
         is_face = np.arange(len(v)) < n_before
