@@ -146,4 +146,10 @@ def test_register_command_writes_the_fit_and_landmarks_or_nothing(tmp_path, caps
     with pytest.raises(SystemExit):
         cli(["register", "--mesh", str(path), "--units", "mm", "--out", str(tmp_path / "no" / "x.obj")])
     assert "--units mm contradicts its size; it looks like m" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        cli(["register", "--mesh", str(path), "--set", "stiffnes=1", "--out", str(tmp_path / "no" / "x.obj")])
+    assert "NAME a setting of registration" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        cli(["register", "--mesh", str(path), "--set", "trim=0.1", "--out", str(tmp_path / "no" / "x.obj")])
+    assert "trim must be in [0.5, 1]" in capsys.readouterr().err
     assert not (tmp_path / "no").exists()
