@@ -298,3 +298,48 @@ def test_chapters_follow_the_notation_page():
     for nb in sorted((ROOT / "book").glob("*.ipynb")):
         found = [(rule, span) for text in page_texts(nb) for rule, span in notation_violations(text)]
         assert not found, f"{nb.name} uses a symbol against book/notation.md: {found}"
+
+
+def prerequisites(nb):
+    """The chapters a notebook's **Prerequisites:** line names ("02–04" is a range; "... is not needed" is not)."""
+    first = "".join(json.loads(nb.read_text())["cells"][0]["source"])
+    line = re.search(r"\*\*Prerequisites:\*\*(.*?)(?:\n\n|$)", first, re.S)
+    if line is None:
+        return None
+    text = re.sub(r"\{ref\}`[^`]*<ch(\w\w)>`(?:[^{]*?is not needed)", "", line.group(1))
+    found = set()
+    for a, b in re.findall(r"<ch(\d\d)>`–\{ref\}`[^`]*<ch(\d\d)>", text):
+        found |= {f"{k:02d}" for k in range(int(a), int(b) + 1)}
+    return found | set(re.findall(r"<ch(\d\d|a1)>", text))
+
+
+def test_the_chapter_map_draws_the_prerequisites():
+    """book/_static/make_diagrams.py's chapter map (direct dependencies) agrees with every chapter's
+    **Prerequisites:** line: each prerequisite is reachable along the map's arrows, and each arrow into a
+    chapter comes from a prerequisite or from something a prerequisite builds on."""
+    import importlib.util
+    spec = importlib.util.spec_from_file_location("diagrams", ROOT / "book" / "_static" / "make_diagrams.py")
+    diagrams = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(diagrams)
+    parents = {}
+    for a, c in diagrams.EDGES:
+        parents.setdefault(c, set()).add(a)
+
+    def ancestors(c):
+        found, todo = set(), list(parents.get(c, ()))
+        while todo:
+            a = todo.pop()
+            if a not in found:
+                found.add(a)
+                todo += parents.get(a, ())
+        return found
+
+    chapters = {p.stem[:2]: p for p in (ROOT / "book").glob("*.ipynb")}
+    assert set(diagrams.CHAPTERS) == set(chapters), "every chapter is a box of the map, and only chapters"
+    for key, path in chapters.items():
+        needs = prerequisites(path)
+        assert needs is not None, f"{path.name} has no **Prerequisites:** line"
+        assert needs <= ancestors(key), f"{path.name}: prerequisites {sorted(needs - ancestors(key))} not on the map"
+        covered = needs.union(*(ancestors(n) for n in needs)) if needs else set()
+        assert parents.get(key, set()) <= covered, \
+            f"{path.name}: the map draws {sorted(parents[key] - covered)} into it, its prerequisites do not"
