@@ -5,6 +5,7 @@ import json
 import numpy as np
 import pytest
 import trimesh
+from hypothesis import HealthCheck, given, settings, strategies as st
 from scipy.spatial.transform import Rotation
 
 from facelib import config, registration as reg
@@ -153,3 +154,43 @@ def test_register_command_writes_the_fit_and_landmarks_or_nothing(tmp_path, caps
         cli(["register", "--mesh", str(path), "--set", "trim=0.1", "--out", str(tmp_path / "no" / "x.obj")])
     assert "trim must be in [0.5, 1]" in capsys.readouterr().err
     assert not (tmp_path / "no").exists()
+
+
+@st.composite
+def bad_mesh(draw):
+    """(vertices, faces, what the error must say): a face-sized mesh with exactly one defect."""
+    v = np.array(T.vertices, dtype=np.float64)
+    f = np.array(T.faces)
+    defect = draw(st.sampled_from(["nan", "inf", "index", "negative", "no faces", "flat faces", "quads",
+                                   "2-d vertices", "too few", "tiny", "huge", "float faces"]))
+    if defect in ("nan", "inf"):
+        v[draw(st.integers(0, len(v) - 1)), draw(st.integers(0, 2))] = np.nan if defect == "nan" else -np.inf
+        return v, f, "with NaN or inf"
+    if defect in ("index", "negative"):
+        f[draw(st.integers(0, len(f) - 1)), draw(st.integers(0, 2))] = len(v) + 3 if defect == "index" else -1
+        return v, f, "index vertices outside"
+    if defect == "no faces":
+        return v, np.zeros((0, 3), int), "no triangles"
+    if defect in ("flat faces", "quads"):
+        return v, (f.ravel()[:99] if defect == "flat faces" else np.zeros((10, 4), int)), "(K, 3) integer triangles"
+    if defect == "float faces":
+        return v, f.astype(float), "(K, 3) integer triangles"
+    if defect == "2-d vertices":
+        return v[:, :2], f, "no vertices of shape (V, 3)"
+    if defect == "too few":
+        n = draw(st.integers(3, 299))
+        return v[:n], f[(f < n).all(1)][:1] if (f < n).all(1).any() else np.array([[0, 1, 2]]), "allowed: 300"
+    # Scales at which the 210 mm tall face fits no unit's range (80-500 mm in mm, cm or m).
+    scale = draw(st.sampled_from([1e-4, 3e-3, 0.3, 3.0]) if defect == "tiny" else st.floats(5e3, 1e6))
+    return v * scale, f, "a face mesh is 80-500 mm across"
+
+
+@settings(max_examples=200, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
+@given(case=bad_mesh(), units=st.sampled_from([None, "mm", "cm", "m"]))
+def test_generated_bad_meshes_get_a_clear_error(case, units):
+    """One defect at a time: a ValueError that names it (never an IndexError or a silent mesh)."""
+    vertices, faces, message = case
+    with pytest.raises(ValueError) as e:
+        reg.check_mesh(vertices, faces, units)
+    text = str(e.value)
+    assert message in text or (units is not None and "contradicts its size" in text), text
