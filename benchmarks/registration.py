@@ -48,13 +48,13 @@ COLUMNS = ["case", "vertices", "units", "landmarks: median (mm)", "landmarks: p9
 
 
 def landmark_errors(landmarks, truth, units):
-    return np.linalg.norm(landmarks - truth, axis=-1) * scans.UNITS_MM[units]
+    return np.linalg.norm(landmarks - truth, axis=-1) * config.UNITS_MM[units]
 
 
 def apex_errors(reg, scan):
     """Per label: mean over the scan's face vertices of |transferred motion - true motion| (mm)."""
     r, _ = reg.pose
-    mm = scans.UNITS_MM[scan.units]
+    mm = config.UNITS_MM[scan.units]
     out = []
     for label, motion in scan.template_motion.items():
         frames = np.stack([reg.neutral, reg.neutral + (motion * mm) @ r.T])
@@ -76,7 +76,7 @@ def face_row(case, kwargs, faces, settings):
         seconds.append(time.perf_counter() - t0)
         lm.append(landmark_errors(reg.landmarks, scan.truth_landmarks, scan.units))
         for stage in by_stage:
-            by_stage[stage].append(landmark_errors(reg.stages[stage][index] / scans.UNITS_MM[scan.units],
+            by_stage[stage].append(landmark_errors(reg.stages[stage][index] / config.UNITS_MM[scan.units],
                                                    scan.truth_landmarks, scan.units))
         errors = apex_errors(reg, scan)
         apex += [float(e.mean()) for e in errors]

@@ -720,6 +720,9 @@ class GeometryAdaptive(Sampling):
         return replace(self, steps=10)
 
 
+UNITS_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0}  # millimetres per unit of a reader's mesh (the chapter "Your own face")
+
+
 @dataclass(frozen=True)
 class Registration:
     """Fitting the template to a reader's own face mesh (facelib/registration.py, the chapter "Your own face")."""
@@ -743,7 +746,7 @@ class Registration:
 
     def __post_init__(self):
         if self.units is not None:
-            _check_choice("units", self.units, ("mm", "cm", "m"))
+            _check_choice("units", self.units, tuple(UNITS_MM))
         _check_positive_int("samples", self.samples)
         _check_positive_int("rigid_iterations", self.rigid_iterations)
         _check_positive_int("model_rounds", self.model_rounds)

@@ -19,6 +19,7 @@ template's surface (barycentric interpolation), fading out with its distance fro
 """
 from __future__ import annotations
 
+import itertools
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -31,9 +32,9 @@ from scipy.spatial.transform import Rotation
 from . import config
 from .face import identity
 from .face import template as tpl
-from .face.surface import closest_points
+from .face.surface import closest_points, interpolate
 
-UNITS = {"mm": 1.0, "cm": 10.0, "m": 1000.0}  # millimetres per unit
+UNITS = config.UNITS_MM  # millimetres per unit
 FACE_EXTENT_MM = (80.0, 500.0)  # the largest side of a face (or head) mesh's bounding box, in mm
 VERTEX_LIMITS = (300, 200_000)
 FACE_SCALE = (0.6, 1.6)  # a face is 0.6-1.6 times the template's size (rigid alignment's scale)
@@ -121,16 +122,14 @@ def read_mesh(path, units=None):
     if path.suffix.lower() not in MESH_SUFFIXES:
         raise ValueError(f"{path}: unknown mesh format {path.suffix!r}; allowed: {', '.join(MESH_SUFFIXES)}")
     try:
-        if isinstance(trimesh.load(path, process=False), trimesh.PointCloud):
-            raise ValueError(f"{path} is a point cloud (no triangles), which cannot be registered; give a triangle "
-                             f"mesh (OBJ, PLY, STL or OFF)")
-        mesh = trimesh.load(path, process=False, maintain_order=True, force="mesh")  # a scene's parts, merged
-    except ValueError as e:
-        if "point cloud" in str(e):
-            raise
-        raise ValueError(f"cannot read {path} as a mesh: {e}") from e
+        mesh = trimesh.load(path, process=False, maintain_order=True)
+        if isinstance(mesh, trimesh.Scene):
+            mesh = mesh.to_mesh()  # a scene's parts, merged
     except Exception as e:  # trimesh raises many types for unreadable files
         raise ValueError(f"cannot read {path} as a mesh: {e}") from e
+    if isinstance(mesh, trimesh.PointCloud):
+        raise ValueError(f"{path} is a point cloud (no triangles), which cannot be registered; give a triangle "
+                         f"mesh (OBJ, PLY, STL or OFF)")
     vertices = np.asarray(getattr(mesh, "vertices", np.zeros((0, 3))))
     faces = np.asarray(getattr(mesh, "faces", np.zeros((0, 3), dtype=np.int64)))
     return check_mesh(vertices, faces.reshape(-1, 3), units, source=str(path))
@@ -149,18 +148,18 @@ def similarity(source, target, scale=True):
 
 
 def _principal_axes(points):
+    """The centroid and the principal axes (columns, largest variance first) as a right-handed frame, so that
+    matching two frames gives a proper rotation."""
     centre = points.mean(0)
-    var, axes = np.linalg.eigh(np.cov((points - centre).T))
-    axes = axes[:, ::-1].copy()
+    axes = np.linalg.eigh(np.cov((points - centre).T))[1][:, ::-1].copy()
     if np.linalg.det(axes) < 0:
-        axes[:, 2] *= -1  # a right-handed frame, so that matching two frames gives a proper rotation
-    return centre, var[::-1], axes
+        axes[:, 2] *= -1
+    return centre, axes
 
 
 def _axis_matches():
     """The 24 rotations that map the coordinate axes onto themselves (signed permutation matrices, det 1):
     every way of matching the principal axes of two surfaces."""
-    import itertools
     found = []
     for perm in itertools.permutations(range(3)):
         for signs in itertools.product((1.0, -1.0), repeat=3):
@@ -179,8 +178,9 @@ def rigid_alignment(points, template_points, settings=config.Registration()):
     distance (mm of the template) of that placement: the best of 24 starts (the principal axes of the two surfaces
     matched in every order and direction that is a rotation, AXIS_MATCHES), each refined by similarity ICP."""
     tree = cKDTree(points)
-    cu, var_u, axes_u = _principal_axes(points)
-    ct, var_t, axes_t = _principal_axes(template_points)
+    cu, axes_u = _principal_axes(points)
+    ct, axes_t = _principal_axes(template_points)
+
     def icp(x, s, r, t, iterations):
         keep_n = max(3, int(settings.trim * len(x)))
         for _ in range(iterations):
@@ -191,11 +191,9 @@ def rigid_alignment(points, template_points, settings=config.Registration()):
         return s, r, t, float(np.sqrt(np.mean(np.sort(d)[:keep_n] ** 2)) / s)
 
     # A third of the iterations from every start with every 8th template point, the rest from the best start
-    # with all of them.
-    coarse = template_points[::8]
-    s = 1.0  # the mesh is in mm by now, and faces are about the template's size (FACE_SCALE)
-    starts = [icp(coarse, s, axes_u @ m @ axes_t.T, cu - s * axes_u @ m @ axes_t.T @ ct, settings.rigid_iterations // 3)
-              for m in AXIS_MATCHES]
+    # with all of them.  Every start has scale 1: the mesh is in mm by now, and faces are about the template's size.
+    rotations = [axes_u @ m @ axes_t.T for m in AXIS_MATCHES]
+    starts = [icp(template_points[::8], 1.0, r, cu - r @ ct, settings.rigid_iterations // 3) for r in rotations]
     s, r, t, _ = min(starts, key=lambda start: start[3])
     return icp(template_points, s, r, t, settings.rigid_iterations - settings.rigid_iterations // 3)
 
@@ -281,7 +279,7 @@ class Registration:
         """The template's albedo (V_user, 3) at each user vertex's closest point of the fitted template
         (lips, brows, the mouth interior): for renders of the user's mesh."""
         tri, bary, _ = self.correspondence
-        return np.einsum("uk,ukc->uc", bary, tpl.get_template().colors[tpl.get_template().faces[tri]])
+        return interpolate(tpl.get_template().colors, tpl.get_template().faces, tri, bary)
 
     def fitted_in_user_units(self):
         return self.fitted / UNITS[self.mesh.units]
@@ -298,9 +296,8 @@ class Registration:
             raise ValueError(f"frames must be (F, {expected[0]}, 3) template meshes, "
                              f"got {frames.shape}")
         tri, bary, dist = self.correspondence
-        corners = tpl.get_template().faces[tri]  # (V_user, 3)
-        motion = frames - frames[:1]
-        moved = np.einsum("uk,fukd->fud", bary, motion[:, corners])
+        faces = tpl.get_template().faces
+        moved = interpolate(frames - frames[:1], faces, tri, bary)  # (F, V_user, 3)
         near, far = self.settings.falloff_mm
         weight = np.clip((far - dist) / (far - near), 0.0, 1.0)
         weight = weight * weight * (3 - 2 * weight)  # smoothstep: no crease

@@ -12,13 +12,13 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from .. import config
 from . import identity
 from . import template as tpl
 from .aus import Face, au_vector, vertex_normals
 from .expressions import RECIPES
-from .surface import closest_points
+from .surface import closest_points, interpolate
 
-UNITS_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0}
 REMESHINGS = ("subdivided", "decimated", "remeshed")
 
 
@@ -149,8 +149,7 @@ def make_scan(seed, remeshing="remeshed", units="mm", noise_mm=0.0, holes=0, ext
     # Each new vertex lies on (or, after decimation, within a fraction of a millimetre of) the true neutral surface:
     # its true motion is the motion at its closest point there.
     tri, bary, _ = closest_points(neutral, t.faces, v)
-    corners = t.faces[tri]
-    vertex_motion = {k: np.einsum("uk,ukd->ud", bary, m[corners]) for k, m in motion.items()}
+    vertex_motion = {k: interpolate(m, t.faces, tri, bary) for k, m in motion.items()}
     if holes:
         # Holes away from the landmarks (cheeks, forehead, temples): a scan's typical gaps.
         far = np.linalg.norm(v[:, None] - landmarks[None], axis=-1).min(1) > 15.0
@@ -167,7 +166,7 @@ def make_scan(seed, remeshing="remeshed", units="mm", noise_mm=0.0, holes=0, ext
         v = v + rng.normal(0.0, noise_mm, v.shape)
     rotation = Rotation.random(random_state=rng).as_matrix()
     translation = rng.uniform(-300.0, 300.0, 3)
-    scale = UNITS_MM[units]
+    scale = config.UNITS_MM[units]
     return Scan(name or remeshing, (v @ rotation.T + translation) / scale, f, units, rotation, translation, is_face,
                 (landmarks @ rotation.T + translation) / scale,
                 {k: m @ rotation.T / scale for k, m in vertex_motion.items()},

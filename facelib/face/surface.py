@@ -22,6 +22,12 @@ def closest_points(vertices, faces, points, candidates=16):
     return cand[rows, best], bary[rows, best], dist[rows, best]
 
 
+def interpolate(values, faces, triangle, barycentric):
+    """Per-vertex ``values`` (..., V, C) of a mesh with ``faces`` read at points given as (triangle (n,),
+    barycentric (n, 3)), e.g. from :func:`closest_points`: (..., n, C)."""
+    return np.einsum("nk,...nkc->...nc", barycentric, np.asarray(values)[..., np.asarray(faces)[triangle], :])
+
+
 def _closest_on_triangles(p, a, b, c):
     """Barycentric coordinates (..., 3) of the point of triangle (a, b, c) closest to p (Ericson's regions)."""
     def dot(x, y):
