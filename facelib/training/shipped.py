@@ -11,10 +11,8 @@ from ..checkpoints import checkpoint_name
 _DEFORMER_METHODS = ("ours", "no_attention", "s2d", "coma", "linear")
 SHIPPED = {
     "denoiser_coma": ("denoiser", {}),
-    # Issue 43 doubled the denoiser's steps (config.DenoiserTraining: 24,000); the merged denoiser keeps its 12,000
-    # until it is retrained (about an hour on 2 cores).
     "denoiser_bu": ("denoiser", {"dataset": "bu"}),
-    "denoiser_coma+bu": ("denoiser", {"dataset": "coma+bu", "steps": 12_000}),
+    "denoiser_coma+bu": ("denoiser", {"dataset": "coma+bu"}),
     "denoiser_coma_var": ("denoiser", {"num_frames": (35, 45), "steps": 8000}),
     "guide_coma_I": ("guide", {}),
     "guide_coma_S": ("guide", {"classifier_type": "S"}),
