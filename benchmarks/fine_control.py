@@ -1,35 +1,46 @@
-"""Fine control (the fine-control chapter, not in the paper): AU-intensity curves and landmark keyframes.
+"""Fine control (the fine-control chapter, not in the paper): AU-intensity curves and
+landmark keyframes.
 
 Usage:
-    python benchmarks/fine_control.py --experiment au [--n 32] [--steps 50] [--save NAME]
-    python benchmarks/fine_control.py --experiment floor [--save NAME]
-    python benchmarks/fine_control.py --experiment keyframes [--n 32] [--steps 100] [--save NAME]
+    python benchmarks/fine_control.py --experiment au [--n 32] [--steps 50] [--save
+    NAME] python benchmarks/fine_control.py --experiment floor [--save NAME]
+    python benchmarks/fine_control.py --experiment keyframes [--n 32] [--steps 100]
+    [--save NAME]
 
-``au``: ``--n`` random requests of one AU within the data's range (experiments.random_requests), and ``--n`` of an AU
-pair that no training sequence activates together (tasks.never_together), each generated once by AU-curve
-control on the neutral face of a held-out test subject; that subject's rig is fitted back to every result
-(tasks.fitted_curves) and the mean absolute error (intensity units) to the requested curve is taken over the
-constrained frames and AUs; beside it the change of that error from "AU guidance off" (paired: the same requests,
-faces and seeds) and the error of the curves the AU regressor R reads on the results (tasks.regressor_curves,
-what the guidance climbs).  The row "AU guidance off" runs the same chain on the same faces with the AU
-score's weight zero (tasks.AU_GUIDANCE_OFF; Alg. 1's Adagrad steps still pull towards the denoiser's mean): the
-part of the FID that animating a given face costs, without the AU guidance.  Only AUs the fit recovers within
-FLOOR on real test sequences are requested (experiments.fit_floor, tasks.measurable_aus).  Beside it the FID of the
-results (the type-I IC of coma) and the unconditional samples' FID on the same number of sequences.
+``au``: ``--n`` random requests of one AU within the data's range
+(experiments.random_requests), and ``--n`` of an AU pair that no training sequence
+activates together (tasks.never_together), each generated once by AU-curve control on
+the neutral face of a held-out test subject; that subject's rig is fitted back to every
+result (tasks.fitted_curves) and the mean absolute error (intensity units) to the
+requested curve is taken over the constrained frames and AUs; beside it the change of
+that error from "AU guidance off" (paired: the same requests, faces and seeds) and the
+error of the curves the AU regressor R reads on the results (tasks.regressor_curves,
+what the guidance climbs).  The row "AU guidance off" runs the same chain on the same
+faces with the AU score's weight zero (tasks.AU_GUIDANCE_OFF; Alg. 1's Adagrad steps
+still pull towards the denoiser's mean): the part of the FID that animating a given face
+costs, without the AU guidance.  Only AUs the fit recovers within FLOOR on real test
+sequences are requested (experiments.fit_floor, tasks.measurable_aus).  Beside it the
+FID of the results (the type-I IC of coma) and the unconditional samples' FID on the
+same number of sequences.
 
-``floor``: the rig fit's error per AU on real test sequences with their own faces (experiments.fit_floor), and the AUs
-the ``au`` experiment requests (tasks.measurable_aus).
+``floor``: the rig fit's error per AU on real test sequences with their own faces
+(experiments.fit_floor), and the AUs the ``au`` experiment requests
+(tasks.measurable_aus).
 
-``keyframes``: ``--n`` random keys (experiments.random_keys: the displacement of a mobile landmark at a frame of a
-real test sequence, from its subject's neutral face), met by each method (replace, reconstruction, both);
-the constraint error (mm), the share of requests within config.KEYFRAME_TOLERANCE whose keyed landmark moves into
-and out of the keyed frame no faster than the 95th percentile of that landmark's frame-to-frame motion in the test
-data, and the FID against the unconstrained samples'.  Every mean with its 95 % bootstrap interval.
+``keyframes``: ``--n`` random keys (experiments.random_keys: the displacement of a
+mobile landmark at a frame of a real test sequence, from its subject's neutral face),
+met by each method (replace, reconstruction, both); the constraint error (mm), the share
+of requests within config.KEYFRAME_TOLERANCE whose keyed landmark moves into and out of
+the keyed frame no faster than the 95th percentile of that landmark's frame-to-frame
+motion in the test data, and the FID against the unconstrained samples'.  Every mean
+with its 95 % bootstrap interval.
 
     python benchmarks/fine_control.py --experiment au --save fine_control_au
     python benchmarks/fine_control.py --experiment floor --save fine_control_floor
-    python benchmarks/fine_control.py --experiment keyframes --save fine_control_keyframes
+    python benchmarks/fine_control.py --experiment keyframes --save
+    fine_control_keyframes
 """
+
 import argparse
 import time
 
@@ -37,90 +48,209 @@ import numpy as np
 
 from facelib import config, data, evaluation, experiments, metrics, results, tasks
 
-AU_GUIDANCE_OFF_ROW = "AU guidance off"  # tasks.AU_GUIDANCE_OFF: the same chain and face, the AU score's weight 0
-FLOOR = config.AU_MEASURABLE_FIT_ERROR  # AUs whose rig fit on real sequences errs by more cannot be scored at 0.1
-MEASURED = {"au": (config.AUControl(),), "floor": (), "keyframes": (config.Keyframes(),)}  # the defaults measured
-FLOOR_SEQUENCES = 30  # test sequences the rig fit's error is measured on (experiments.fit_floor's default)
+# tasks.AU_GUIDANCE_OFF: the same chain and face, the AU score's weight 0
+AU_GUIDANCE_OFF_ROW = (
+    "AU guidance off"
+)
+FLOOR = (
+    config.AU_MEASURABLE_FIT_ERROR
+)  # AUs whose rig fit on real sequences errs by more cannot be scored at 0.1
+MEASURED = {
+    "au": (config.AUControl(),),
+    "floor": (),
+    "keyframes": (config.Keyframes(),),
+}  # the defaults measured
+# test sequences the rig fit's error is measured on (experiments.fit_floor's default)
+FLOOR_SEQUENCES = 30
 COLUMNS = {
-    "au": ["requests", "method", "n", "MAE (intensity)", "MAE 95 % interval", "MAE change vs AU guidance off",
-           "change 95 % interval", "MAE read by R", "R 95 % interval", "share with MAE <= 0.1 (%)", "FID",
-           "FID 95 % interval", "s per sequence", "AUs requested"],
-    "floor": ["AU", "rig fit error (intensity)", "highest intensity in the data", "requested"],
-    "keyframes": ["method", "n", "constraint error (mm)", "error 95 % interval", "met (%)", "met 95 % interval",
-                  "FID", "FID 95 % interval", "s per sequence"],
+    "au": [
+        "requests",
+        "method",
+        "n",
+        "MAE (intensity)",
+        "MAE 95 % interval",
+        "MAE change vs AU guidance off",
+        "change 95 % interval",
+        "MAE read by R",
+        "R 95 % interval",
+        "share with MAE <= 0.1 (%)",
+        "FID",
+        "FID 95 % interval",
+        "s per sequence",
+        "AUs requested",
+    ],
+    "floor": [
+        "AU",
+        "rig fit error (intensity)",
+        "highest intensity in the data",
+        "requested",
+    ],
+    "keyframes": [
+        "method",
+        "n",
+        "constraint error (mm)",
+        "error 95 % interval",
+        "met (%)",
+        "met 95 % interval",
+        "FID",
+        "FID 95 % interval",
+        "s per sequence",
+    ],
 }
-SEEDS = {"au": [1, 2, 3], "floor": [], "keyframes": [4, 5]}  # what each experiment draws with (see its notes)
+SEEDS = {
+    "au": [1, 2, 3],
+    "floor": [],
+    "keyframes": [4, 5],
+}  # what each experiment draws with (see its notes)
 
 
 def fid_with_interval(evaluator, x):
-    """FID of sequences against the training split (the IC's logits), with its 95 % bootstrap interval."""
+    """FID of sequences against the training split (the IC's logits), with its 95 %
+    bootstrap interval."""
     f = evaluator.features(x)
-    statistic = lambda g: metrics.frechet_distance(g, evaluator.reference_features)  # noqa: E731
-    return statistic(f), [float(v) for v in metrics.bootstrap_interval(statistic, f, num_resamples=200)]
+    statistic = lambda g: metrics.frechet_distance(
+        g, evaluator.reference_features
+    )  # noqa: E731
+    return statistic(f), [
+        float(v) for v in metrics.bootstrap_interval(statistic, f, num_resamples=200)
+    ]
 
 
 def au_rows(args, evaluator):
     floor = experiments.fit_floor("coma", n=FLOOR_SEQUENCES)
     measurable = tasks.measurable_aus(floor, max_error=FLOOR)
     pairs = [p for p in tasks.never_together("coma") if set(p) <= set(measurable)]
-    requests = {"one AU": experiments.random_requests(args.n, seed=1, aus=measurable),
-                "an AU pair never active together": experiments.random_requests(args.n, seed=2, pairs=pairs)}
-    test = data.load_dataset("coma", "test")  # the faces animated: held-out subjects, each its own rig
-    subjects = np.unique(test.subjects)[np.arange(args.n) % len(np.unique(test.subjects))]
+    requests = {
+        "one AU": experiments.random_requests(args.n, seed=1, aus=measurable),
+        "an AU pair never active together": experiments.random_requests(
+            args.n, seed=2, pairs=pairs
+        ),
+    }
+    test = data.load_dataset(
+        "coma", "test"
+    )  # the faces animated: held-out subjects, each its own rig
+    subjects = np.unique(test.subjects)[
+        np.arange(args.n) % len(np.unique(test.subjects))
+    ]
     neutral = np.stack([test.neutral_landmarks(int(s)) for s in subjects])
     faces = [test.face(int(s)) for s in subjects]
     t0 = time.perf_counter()
     plain = tasks.unconditional(args.n, steps=args.steps, seed=3, progress=False)
     fid, fid_ci = fid_with_interval(evaluator, plain)
-    rows = [["(none)", "unconditional", args.n, "", "", "", "", "", "", "", fid, fid_ci,
-             (time.perf_counter() - t0) / args.n, []]]
+    rows = [
+        [
+            "(none)",
+            "unconditional",
+            args.n,
+            "",
+            "",
+            "",
+            "",
+            "",
+            "",
+            "",
+            fid,
+            fid_ci,
+            (time.perf_counter() - t0) / args.n,
+            [],
+        ]
+    ]
     runs = {f"adagrad, lr {lr:g}" if lr else "adagrad": dict(lr=lr) for lr in args.lr}
     runs |= {"mean_shift": dict(method="mean_shift")}
-    interval = lambda statistic, *x: [float(v) for v in metrics.bootstrap_interval(statistic, *x)]  # noqa: E731
+    interval = lambda statistic, *x: [
+        float(v) for v in metrics.bootstrap_interval(statistic, *x)
+    ]  # noqa: E731
 
     def generate(request, setting):
         t0 = time.perf_counter()
-        x = tasks.au_control(request, args.n, neutral, steps=args.steps, seed=3, progress=False, **setting)
+        x = tasks.au_control(
+            request,
+            args.n,
+            neutral,
+            steps=args.steps,
+            seed=3,
+            progress=False,
+            **setting,
+        )
         return x, (time.perf_counter() - t0) / args.n, *fid_with_interval(evaluator, x)
 
-    # AU guidance off never reads the request (its score is 0): one chain serves both kinds of request
+    # AU guidance off never reads the request (its score is 0): one chain serves both
+    # kinds of request
     unread = generate(requests["one AU"], tasks.AU_GUIDANCE_OFF)
     for name, request in requests.items():
         measured = {}
-        for label, generated in [*((label, generate(request, s)) for label, s in runs.items()),
-                                 (AU_GUIDANCE_OFF_ROW, unread)]:
+        for label, generated in [
+            *((label, generate(request, s)) for label, s in runs.items()),
+            (AU_GUIDANCE_OFF_ROW, unread),
+        ]:
             x, seconds, fid, fid_ci = generated
             errors = tasks.curve_errors(tasks.fitted_curves(x, faces), request)
             read = tasks.curve_errors(tasks.regressor_curves(x), request)
             measured[label] = (errors, read, fid, fid_ci, seconds)
         off = measured[AU_GUIDANCE_OFF_ROW][0]
-        for label in [*runs, AU_GUIDANCE_OFF_ROW]:  # the stored order: the guided rows, then the twin
+        for label in [
+            *runs,
+            AU_GUIDANCE_OFF_ROW,
+        ]:  # the stored order: the guided rows, then the twin
             errors, read, fid, fid_ci, seconds = measured[label]
-            change = ["", ""] if label == AU_GUIDANCE_OFF_ROW else [
-                float((errors - off).mean()), interval(lambda a, b: (a - b).mean(), errors, off)]
-            rows.append([name, label, args.n, float(errors.mean()), interval(np.mean, errors), *change,
-                         float(read.mean()), interval(np.mean, read), float(100 * (errors <= 0.1).mean()), fid,
-                         fid_ci, seconds, tasks.requested_aus(request)])
+            change = (
+                ["", ""]
+                if label == AU_GUIDANCE_OFF_ROW
+                else [
+                    float((errors - off).mean()),
+                    interval(lambda a, b: (a - b).mean(), errors, off),
+                ]
+            )
+            rows.append(
+                [
+                    name,
+                    label,
+                    args.n,
+                    float(errors.mean()),
+                    interval(np.mean, errors),
+                    *change,
+                    float(read.mean()),
+                    interval(np.mean, read),
+                    float(100 * (errors <= 0.1).mean()),
+                    fid,
+                    fid_ci,
+                    seconds,
+                    tasks.requested_aus(request),
+                ]
+            )
             print(rows[-1], flush=True)
-    args.notes = (f"requests on the AUs the rig fit recovers within {FLOOR} on real test sequences "
-                  f"({', '.join(measurable)}; fit floor per AU: "
-                  + ", ".join(f"{a} {e:.3f}" for a, e in floor.items()) + "); each animates the neutral face of a "
-                  "held-out test subject, its curves fitted with that subject's rig; requests drawn with seeds 1 "
-                  "(one AU) and 2 (pairs), sampled with seed 3; the row AU guidance off is one chain for both "
-                  "kinds of request (it never reads the request)")
+    args.notes = (
+        f"requests on the AUs the rig fit recovers within {FLOOR} on real test"
+        f" sequences ({', '.join(measurable)}; fit floor per AU: "
+        + ", ".join(f"{a} {e:.3f}" for a, e in floor.items())
+        + "); each animates the neutral face of a held-out test subject, its curves"
+        " fitted with that subject's rig; requests drawn with seeds 1 (one AU) and 2"
+        " (pairs), sampled with seed 3; the row AU guidance off is one chain for both"
+        " kinds of request (it never reads the request)"
+    )
     return rows, ["denoiser_coma", "au_regressor_coma", "ic_coma_I"]
 
 
 def floor_rows(args, evaluator):
-    """What the scoring of AU-curve control can resolve: the rig fit's error per AU on real test sequences with
-    their own faces (experiments.fit_floor), and which AUs the requests of the au experiment may therefore use."""
-    floor, ranges = experiments.fit_floor("coma", n=FLOOR_SEQUENCES), tasks.data_ranges("coma")
+    """What the scoring of AU-curve control can resolve: the rig fit's error per AU on
+    real test sequences with their own faces (experiments.fit_floor), and which AUs the
+    requests of the au experiment may therefore use.
+    """
+    floor, ranges = experiments.fit_floor("coma", n=FLOOR_SEQUENCES), tasks.data_ranges(
+        "coma"
+    )
     measurable = tasks.measurable_aus(floor, max_error=FLOOR)
-    rows = [[a, e, ranges[a][1], "yes" if a in measurable else "no"] for a, e in floor.items()]
+    rows = [
+        [a, e, ranges[a][1], "yes" if a in measurable else "no"]
+        for a, e in floor.items()
+    ]
     args.n = FLOOR_SEQUENCES
-    args.notes = (f"the rig fit of {FLOOR_SEQUENCES} real test sequences of coma with their own faces, mean absolute "
-                  "error where the AU is above 0.1 (AUs active in fewer than 20 entries left out); requested: error "
-                  f"<= {FLOOR}, pushed by the data to at least 0.5, not the blink AU45")
+    args.notes = (
+        f"the rig fit of {FLOOR_SEQUENCES} real test sequences of coma with their own"
+        " faces, mean absolute error where the AU is above 0.1 (AUs active in fewer"
+        f" than 20 entries left out); requested: error <= {FLOOR}, pushed by the data"
+        " to at least 0.5, not the blink AU45"
+    )
     return rows, []
 
 
@@ -130,60 +260,158 @@ def keyframe_rows(args, evaluator):
     t0 = time.perf_counter()
     plain = tasks.unconditional(args.n, steps=args.steps, seed=5, progress=False)
     fid, fid_ci = fid_with_interval(evaluator, plain)
-    rows = [["unconstrained", args.n, "", "", "", "", fid, fid_ci, (time.perf_counter() - t0) / args.n]]
-    runs = [(m, None) for m in config.KEYFRAME_METHODS] + [("both", z) for z in args.scale]
+    rows = [
+        [
+            "unconstrained",
+            args.n,
+            "",
+            "",
+            "",
+            "",
+            fid,
+            fid_ci,
+            (time.perf_counter() - t0) / args.n,
+        ]
+    ]
+    runs = [(m, None) for m in config.KEYFRAME_METHODS] + [
+        ("both", z) for z in args.scale
+    ]
     for method, zeta in runs:
         t0 = time.perf_counter()
         extra = {} if zeta is None else {"reconstruction_scale": zeta}
-        x = np.concatenate([tasks.keyframes(keys, 1, neutral, steps=args.steps, method=method, seed=5 + k,
-                                            progress=False, **extra) for k, (keys, neutral) in enumerate(requests)])
+        x = np.concatenate(
+            [
+                tasks.keyframes(
+                    keys,
+                    1,
+                    neutral,
+                    steps=args.steps,
+                    method=method,
+                    seed=5 + k,
+                    progress=False,
+                    **extra,
+                )
+                for k, (keys, neutral) in enumerate(requests)
+            ]
+        )
         seconds = (time.perf_counter() - t0) / args.n
         report = tasks.keyframe_report(x, requests, real)
         errors = report["error"]
         fid, fid_ci = fid_with_interval(evaluator, x)
         interval = [float(v) for v in metrics.bootstrap_interval(np.mean, errors)]
         met = report["met"].astype(float)
-        met_ci = [float(np.clip(v, 0, 100)) for v in metrics.bootstrap_interval(lambda h: 100 * h.mean(), met)]
+        met_ci = [
+            float(np.clip(v, 0, 100))
+            for v in metrics.bootstrap_interval(lambda h: 100 * h.mean(), met)
+        ]
         name = method if zeta is None else f"{method}, zeta {zeta:g}"
-        rows.append([name, args.n, float(errors.mean()), interval, float(100 * met.mean()), met_ci, fid, fid_ci,
-                     seconds])
+        rows.append(
+            [
+                name,
+                args.n,
+                float(errors.mean()),
+                interval,
+                float(100 * met.mean()),
+                met_ci,
+                fid,
+                fid_ci,
+                seconds,
+            ]
+        )
         print(rows[-1], flush=True)
-    args.notes = (f"keys drawn with seed 4, request k sampled with seed 5 + k, the unconstrained samples with seed 5; "
-                  f"met: key error <= {config.KEYFRAME_TOLERANCE} mm (config.KEYFRAME_TOLERANCE) and no speed into or "
-                  "out of the keyed frame above the real 95th percentile")
+    args.notes = (
+        "keys drawn with seed 4, request k sampled with seed 5 + k, the unconstrained"
+        f" samples with seed 5; met: key error <= {config.KEYFRAME_TOLERANCE} mm"
+        " (config.KEYFRAME_TOLERANCE) and no speed into or out of the keyed frame"
+        " above the real 95th percentile"
+    )
     return rows, ["denoiser_coma", "ic_coma_I"]
 
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--experiment", choices=list(COLUMNS), required=True)
-    parser.add_argument("--n", type=int, default=32, help="requests per row (default 32)")
-    parser.add_argument("--steps", type=int, default=None, help="reverse steps (default: the task's, config)")
-    parser.add_argument("--lr", type=float, nargs="+", default=[None],
-                        help="au: Adagrad rates to compare (default: the book's, config.AU_CURVE_LR, step-scaled)")
-    parser.add_argument("--scale", type=float, nargs="*", default=[],
-                        help="keyframes: more reconstruction scales zeta to try with 'both' (default: none)")
+    parser.add_argument(
+        "--n", type=int, default=32, help="requests per row (default 32)"
+    )
+    parser.add_argument(
+        "--steps",
+        type=int,
+        default=None,
+        help="reverse steps (default: the task's, config)",
+    )
+    parser.add_argument(
+        "--lr",
+        type=float,
+        nargs="+",
+        default=[None],
+        help=(
+            "au: Adagrad rates to compare (default: the book's, config.AU_CURVE_LR,"
+            " step-scaled)"
+        ),
+    )
+    parser.add_argument(
+        "--scale",
+        type=float,
+        nargs="*",
+        default=[],
+        help=(
+            "keyframes: more reconstruction scales zeta to try with 'both' (default:"
+            " none)"
+        ),
+    )
     results.add_save_options(parser)
     args = parser.parse_args()
     results.check_save_args(args)  # before any compute
-    default = config.Keyframes() if args.experiment == "keyframes" else config.AUControl()
+    default = (
+        config.Keyframes() if args.experiment == "keyframes" else config.AUControl()
+    )
     args.steps = args.steps or default.steps
-    steps = [] if args.experiment == "floor" else [args.steps]  # the floor samples nothing: the rig fit of real data
+    steps = (
+        [] if args.experiment == "floor" else [args.steps]
+    )  # the floor samples nothing: the rig fit of real data
     t_start = time.perf_counter()
-    evaluator = None if args.experiment == "floor" else evaluation.load_evaluator("coma", "I")
-    experiment = {"au": au_rows, "floor": floor_rows, "keyframes": keyframe_rows}[args.experiment]
+    evaluator = (
+        None if args.experiment == "floor" else evaluation.load_evaluator("coma", "I")
+    )
+    experiment = {"au": au_rows, "floor": floor_rows, "keyframes": keyframe_rows}[
+        args.experiment
+    ]
     rows, checkpoints = experiment(args, evaluator)
     if args.save:
-        title = {"au": "AU-curve control: requested against fitted curves",
-                 "floor": "What the rig fit resolves: its error per AU on real test sequences",
-                 "keyframes": "Landmark keyframes: constraint error, smoothness, realism"}[args.experiment]
-        results.save_result(args.save, title, COLUMNS[args.experiment], rows,
-                            results.Run(allow_dirty=args.allow_dirty, settings=MEASURED[args.experiment],
-                                        checkpoints=checkpoints, seeds=SEEDS[args.experiment], n=args.n, steps=steps,
-                                        wall_time_s=time.perf_counter() - t_start),
-                            notes="; ".join(([] if evaluator is None else [
-                                "FID against the training split with the type-I IC of coma",
-                                "intervals by bootstrap over the requests"]) + [args.notes]))
+        title = {
+            "au": "AU-curve control: requested against fitted curves",
+            "floor": (
+                "What the rig fit resolves: its error per AU on real test sequences"
+            ),
+            "keyframes": "Landmark keyframes: constraint error, smoothness, realism",
+        }[args.experiment]
+        results.save_result(
+            args.save,
+            title,
+            COLUMNS[args.experiment],
+            rows,
+            results.Run(
+                allow_dirty=args.allow_dirty,
+                settings=MEASURED[args.experiment],
+                checkpoints=checkpoints,
+                seeds=SEEDS[args.experiment],
+                n=args.n,
+                steps=steps,
+                wall_time_s=time.perf_counter() - t_start,
+            ),
+            notes="; ".join(
+                (
+                    []
+                    if evaluator is None
+                    else [
+                        "FID against the training split with the type-I IC of coma",
+                        "intervals by bootstrap over the requests",
+                    ]
+                )
+                + [args.notes]
+            ),
+        )
 
 
 if __name__ == "__main__":

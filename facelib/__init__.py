@@ -1,42 +1,111 @@
-"""facelib: the code of *Diffusion for 4D Faces*, a reconstruction of the 4D Facial Expression Diffusion
-Model (Zou et al. 2023) on a synthetic face world.
+"""facelib: the code of *Diffusion for 4D Faces*, a reconstruction of the 4D Facial
+Expression Diffusion Model (Zou et al. 2023) on a synthetic face world.
 
 The map of the package, bottom to top.  A module imports only from the layers below it
 (tests/test_layout.py checks every import):
 
-0. ``config``       every default: datasets, training recipes, sampling tasks (paper value or our choice)
-1. ``face``         the synthetic face world: template, identities, action units, expressions, sequences;
-   ``metrics``      accuracy, FID, diversity, seams, bootstrap intervals;  ``srvf``  square-root velocity
-   ``chapters``     run one chapter notebook (``make chapter N=05``) and record its time;
-   ``paper``        the paper's published tables, as printed
-2. ``data``         dataset generation and cache, FaceDataset, splits, the landmark normaliser;
-   ``descriptions`` the words for every expression;  ``diffusion``  schedules and GaussianDiffusion (Eq. 1-8);
-   ``viz``          plots, renders, GIFs;  ``meshio``  OBJ in and out, all or nothing;
-   ``registration`` a reader's mesh (any topology, units, pose) -> the template fitted onto it, motion carried back;
-   ``tables``       numbers with their intervals, Markdown tables, the paper's table beside ours
-3. ``text``         the offline sentence encoder;  ``models``  networks and their configs only;
-   ``checkpoints``  weights + JSON config, sha256-checked
-4. ``guidance``     sampler hooks: Adagrad optimisation (Alg. 1-2), mean shift, reconstruction guidance;
-   ``inpainting``   known frames (Alg. 3);  ``rig_fit``  the rig fitted to landmarks;  ``toy``  a 2-D DDPM;
-   ``results``      stored full-scale results with their provenance
-5. ``baselines``    the related papers' models;  ``deformation``  §3.3 mesh deformation;
-   ``evaluation``   the independent classifier and its scores
-6. ``tasks``        unconditional, label (Alg. 1), text (Alg. 2), fill (Alg. 3), geometry (Alg. 4);
-   ``text_eval``    measurements of text control: what the head reads, compositions, order and label
-7. ``pipeline``     neutral mesh -> animated meshes;  ``training``  one loop, one recipe per model;
-   ``experiments``  the inputs the tables and benchmarks measure the tasks on (Table 1's rows, Table 4's inputs,
-                    random AU requests and keyframes, the rig fit's floor)
-8. ``cli_sample``   the command line's ``sample TASK`` (a subcommand per task, options from config)
-9. ``__main__``     the command line: ``python -m facelib data|train|sample TASK|neutral|animate|register|chapter|results``
+0. ``config``: every default: datasets, training recipes, sampling tasks (paper value
+   or our choice).
+1. ``face``: the synthetic face world: template, identities, action units,
+   expressions, sequences.  ``metrics``: accuracy, FID, diversity, seams, bootstrap
+   intervals.  ``srvf``: square-root velocity.  ``chapters``: run one chapter notebook
+   (``make chapter N=05``) and record its time.  ``paper``: the paper's published
+   tables, as printed.
+2. ``data``: dataset generation and cache, FaceDataset, splits, the landmark
+   normaliser.  ``descriptions``: the words for every expression.  ``diffusion``:
+   schedules and GaussianDiffusion (Eq. 1-8).  ``viz``: plots, renders, GIFs.
+   ``meshio``: OBJ in and out, all or nothing.  ``registration``: a reader's mesh (any
+   topology, units, pose) -> the template fitted onto it, motion carried back.
+   ``tables``: numbers with their intervals, Markdown tables, the paper's table beside
+   ours.
+3. ``text``: the offline sentence encoder.  ``models``: networks and their configs
+   only.  ``checkpoints``: weights + JSON config, sha256-checked.
+4. ``guidance``: sampler hooks: Adagrad optimisation (Alg. 1-2), mean shift,
+   reconstruction guidance.  ``inpainting``: known frames (Alg. 3).  ``rig_fit``: the
+   rig fitted to landmarks.  ``toy``: a 2-D DDPM.  ``results``: stored full-scale
+   results with their provenance.
+5. ``baselines``: the related papers' models.  ``deformation``: §3.3 mesh deformation.
+   ``evaluation``: the independent classifier and its scores.
+6. ``tasks``: unconditional, label (Alg. 1), text (Alg. 2), fill (Alg. 3), geometry
+   (Alg. 4).  ``text_eval``: measurements of text control: what the head reads,
+   compositions, order and label.
+7. ``pipeline``: neutral mesh -> animated meshes.  ``training``: one loop, one recipe
+   per model.  ``experiments``: the inputs the tables and benchmarks measure the tasks
+   on (Table 1's rows, Table 4's inputs, random AU requests and keyframes, the rig
+   fit's floor).
+8. ``cli_sample``: the command line's ``sample TASK`` (a subcommand per task, options
+   from config).
+9. ``__main__``: the command line: ``python -m facelib
+   data|train|sample TASK|neutral|animate|register|chapter|results``.
 
-The public API is the modules themselves: ``from facelib import tasks; tasks.label_control("high_smile")``.
+The public API is the modules themselves: ``from facelib import tasks;
+tasks.label_control("high_smile")``.
 """
-# The layer of every module and subpackage (the map above); tests/test_layout.py checks each import against it.
-LAYERS = {"config": 0, "face": 1, "metrics": 1, "srvf": 1, "chapters": 1, "paper": 1, "data": 2, "descriptions": 2,
-          "diffusion": 2, "viz": 2, "meshio": 2, "registration": 2, "tables": 2, "text": 3, "models": 3, "checkpoints": 3, "guidance": 4,
-          "inpainting": 4, "rig_fit": 4, "toy": 4, "results": 4, "baselines": 5, "deformation": 5, "evaluation": 5,
-          "tasks": 6, "text_eval": 6, "pipeline": 7, "experiments": 7, "training": 7, "cli_sample": 8, "__main__": 9}
-__all__ = ["baselines", "chapters", "checkpoints", "cli_sample", "config", "data", "deformation", "descriptions",
-           "experiments",
-           "diffusion", "evaluation", "face", "guidance", "inpainting", "meshio", "metrics", "models", "paper",
-           "pipeline", "registration", "results", "rig_fit", "srvf", "tables", "tasks", "text", "text_eval", "toy", "training", "viz"]
+
+# The layer of every module and subpackage (the map above); tests/test_layout.py checks
+# each import against it.
+LAYERS = {
+    "config": 0,
+    "face": 1,
+    "metrics": 1,
+    "srvf": 1,
+    "chapters": 1,
+    "paper": 1,
+    "data": 2,
+    "descriptions": 2,
+    "diffusion": 2,
+    "viz": 2,
+    "meshio": 2,
+    "registration": 2,
+    "tables": 2,
+    "text": 3,
+    "models": 3,
+    "checkpoints": 3,
+    "guidance": 4,
+    "inpainting": 4,
+    "rig_fit": 4,
+    "toy": 4,
+    "results": 4,
+    "baselines": 5,
+    "deformation": 5,
+    "evaluation": 5,
+    "tasks": 6,
+    "text_eval": 6,
+    "pipeline": 7,
+    "experiments": 7,
+    "training": 7,
+    "cli_sample": 8,
+    "__main__": 9,
+}
+__all__ = [
+    "baselines",
+    "chapters",
+    "checkpoints",
+    "cli_sample",
+    "config",
+    "data",
+    "deformation",
+    "descriptions",
+    "experiments",
+    "diffusion",
+    "evaluation",
+    "face",
+    "guidance",
+    "inpainting",
+    "meshio",
+    "metrics",
+    "models",
+    "paper",
+    "pipeline",
+    "registration",
+    "results",
+    "rig_fit",
+    "srvf",
+    "tables",
+    "tasks",
+    "text",
+    "text_eval",
+    "toy",
+    "training",
+    "viz",
+]

@@ -1,4 +1,7 @@
-"""Command line of the book: ``python -m facelib {data,train,sample,edit,neutral,animate,register,chapter,results}`` (see ``--help`` of each)."""
+"""Command line of the book: ``python -m facelib
+{data,train,sample,edit,neutral,animate,register,chapter,results}`` (see ``--help`` of
+each)."""
+
 from __future__ import annotations
 
 import argparse
@@ -14,32 +17,57 @@ import time
 
 import numpy as np
 
-from . import chapters, cli_sample, config, data, meshio, pipeline, registration, results, training, viz
+from . import (
+    chapters,
+    cli_sample,
+    config,
+    data,
+    meshio,
+    pipeline,
+    registration,
+    results,
+    training,
+    viz,
+)
 from .face import Face, sample_identity
 
 
 def _data(args):
     names = list(config.DATASETS) if args.name == "all" else [args.name]
-    fingerprints = json.loads(data.FINGERPRINT_FILE.read_text()) if data.FINGERPRINT_FILE.exists() else {}
+    fingerprints = (
+        json.loads(data.FINGERPRINT_FILE.read_text())
+        if data.FINGERPRINT_FILE.exists()
+        else {}
+    )
     status = 0
     for name in names:
         t0 = time.perf_counter()
         arrays = data.build(name, args.frames, rebuild=args.rebuild)
         print(data.summary(name, arrays))
-        print(f"ready in {time.perf_counter() - t0:.1f} s: {data.cache_path(name, args.frames)}")
+        print(
+            f"ready in {time.perf_counter() - t0:.1f} s:"
+            f" {data.cache_path(name, args.frames)}"
+        )
         fp = data.fingerprint(arrays)
         key = f"{name}-F{args.frames}"
         if args.write_fingerprints:
             fingerprints[key] = fp
         elif key in fingerprints:
             same = data.fingerprints_match(fp, fingerprints[key])
-            print(f"fingerprint {'matches' if same else 'DIFFERS FROM'} {data.FINGERPRINT_FILE.name}")
+            print(
+                f"fingerprint {'matches' if same else 'DIFFERS FROM'}"
+                f" {data.FINGERPRINT_FILE.name}"
+            )
             status |= not same
         print()
     if args.write_fingerprints:
         data.FINGERPRINT_FILE.parent.mkdir(parents=True, exist_ok=True)
-        data.FINGERPRINT_FILE.write_text(json.dumps(fingerprints, indent=2, sort_keys=True) + "\n")
-        data.CONFIG_FILE.write_text(json.dumps(data.generator_config(), indent=2) + "\n")
+        data.FINGERPRINT_FILE.write_text(
+            json.dumps(fingerprints, indent=2, sort_keys=True) + "\n"
+        )
+        data.CONFIG_FILE.write_text(
+            json.dumps(data.generator_config(), indent=2) + "\n"
+        )
         print(f"wrote {data.FINGERPRINT_FILE} and {data.CONFIG_FILE}")
     return status
 
@@ -48,14 +76,20 @@ TRAINABLE = tuple(training.RECIPES)  # every recipe is trainable
 
 
 def _setting(model_name, assignment, settings_class=None):
-    """``--set NAME=VALUE`` as (name, value), the value read as the setting's type ('none': None; tuples and
-    lists as Python literals); a clear error for an unknown name or a value of the wrong type.  The settings are
-    the recipe ``model_name``'s, or ``settings_class``'s."""
+    """``--set NAME=VALUE`` as (name, value), the value read as the setting's type
+    ('none': None; tuples and lists as Python literals); a clear error for an unknown
+    name or a value of the wrong type.  The settings are the recipe ``model_name``'s, or
+    ``settings_class``'s."""
     name, sep, text = assignment.partition("=")
-    known = {f.name: f for f in dataclasses.fields(settings_class or training.SETTINGS[model_name])}
+    known = {
+        f.name: f
+        for f in dataclasses.fields(settings_class or training.SETTINGS[model_name])
+    }
     if not sep or name not in known:
-        raise ValueError(f"--set {assignment!r}: expected NAME=VALUE with NAME a setting of {model_name} "
-                         f"({', '.join(known)})")
+        raise ValueError(
+            f"--set {assignment!r}: expected NAME=VALUE with NAME a setting of"
+            f" {model_name} ({', '.join(known)})"
+        )
     kind = str(known[name].type)
     if text.lower() == "none" and ("None" in kind or kind == "object"):
         return name, None
@@ -67,34 +101,63 @@ def _setting(model_name, assignment, settings_class=None):
         try:
             value = ast.literal_eval(text)
         except (ValueError, SyntaxError):
-            raise ValueError(f"--set {name}: a Python literal such as (35, 45) or 40, got {text!r}") from None
+            raise ValueError(
+                f"--set {name}: a Python literal such as (35, 45) or 40, got {text!r}"
+            ) from None
         return name, tuple(value) if isinstance(value, list) else value
     try:
         return name, cli_sample._converter(kind, name)(text)
     except argparse.ArgumentTypeError as e:
-        raise ValueError(f"--set {name}: {e}".replace(f"--{name.replace('_', '-')} ", "")) from None
+        raise ValueError(
+            f"--set {name}: {e}".replace(f"--{name.replace('_', '-')} ", "")
+        ) from None
 
 
 def _train(args):
     if args.name == "all":
         if args.set:
-            raise ValueError("--set changes one recipe's settings; train all trains the shipped ones as they are")
-        training.train_all(args.only, fast=args.fast, out_dir=args.out, missing=args.missing, resume=args.resume)
+            raise ValueError(
+                "--set changes one recipe's settings; train all trains the shipped ones"
+                " as they are"
+            )
+        training.train_all(
+            args.only,
+            fast=args.fast,
+            out_dir=args.out,
+            missing=args.missing,
+            resume=args.resume,
+        )
         return 0
-    given = {"dataset": args.dataset, "classifier_type": args.type, "method": args.method, "split": args.split,
-             "steps": args.steps, "batch_size": args.batch_size, "seed": args.seed,
-             "num_frames": (35, 45) if args.variable_length else None, "conditional": args.conditional or None}
+    given = {
+        "dataset": args.dataset,
+        "classifier_type": args.type,
+        "method": args.method,
+        "split": args.split,
+        "steps": args.steps,
+        "batch_size": args.batch_size,
+        "seed": args.seed,
+        "num_frames": (35, 45) if args.variable_length else None,
+        "conditional": args.conditional or None,
+    }
     given = {k: v for k, v in given.items() if v is not None}
     for assignment in args.set:
         name, value = _setting(args.name, assignment)
         if name in given:
-            raise ValueError(f"--set {name} repeats a setting given by its own option or an earlier --set")
+            raise ValueError(
+                f"--set {name} repeats a setting given by its own option or an earlier"
+                " --set"
+            )
         given[name] = value
     recipe = training.recipe(args.name, fast=args.fast, **given)
     t0 = time.perf_counter()
-    written = training.train_and_save(recipe, name=args.out, device=args.device, resume=args.resume)
+    written = training.train_and_save(
+        recipe, name=args.out, device=args.device, resume=args.resume
+    )
     if written:
-        print(f"trained in {time.perf_counter() - t0:.0f} s; wrote {written[0]} and {written[1]}")
+        print(
+            f"trained in {time.perf_counter() - t0:.0f} s; wrote {written[0]} and"
+            f" {written[1]}"
+        )
     return 0
 
 
@@ -102,17 +165,24 @@ def _neutral(args):
     if args.out is None or not str(args.out).lower().endswith(".obj"):
         raise ValueError(f"--out must name an .obj file, got {args.out!r}")
     meshio.write_obj(args.out, Face(sample_identity(args.seed)).neutral)
-    print(f"wrote {args.out}: the neutral face of identity seed {args.seed} (template topology, mm)")
+    print(
+        f"wrote {args.out}: the neutral face of identity seed {args.seed} (template"
+        " topology, mm)"
+    )
     return 0
 
 
 def _registration_settings(args):
-    """config.Registration with --units and every --set NAME=VALUE of `register` and `animate`."""
+    """config.Registration with --units and every --set NAME=VALUE of `register` and
+    `animate`."""
     given = {}
     for assignment in args.set:
         name, value = _setting("registration", assignment, config.Registration)
         if name in given or name == "units":
-            raise ValueError(f"--set {name} repeats a setting given by its own option (--units) or an earlier --set")
+            raise ValueError(
+                f"--set {name} repeats a setting given by its own option (--units) or"
+                " an earlier --set"
+            )
         given[name] = value
     return dataclasses.replace(config.Registration(), units=args.units, **given)
 
@@ -123,45 +193,85 @@ def _animate(args):
     mesh = registration.read_mesh(args.mesh, settings.units)
     seconds = {"read mesh": time.perf_counter() - t0}
     steps = config.GeometryAdaptive().steps if args.steps is None else args.steps
-    anim = pipeline.animate_mesh(mesh, args.label, settings, order=args.order, steps=steps, seed=args.seed,
-                                 progress=True)
+    anim = pipeline.animate_mesh(
+        mesh,
+        args.label,
+        settings,
+        order=args.order,
+        steps=steps,
+        seed=args.seed,
+        progress=True,
+    )
     seconds.update(anim.seconds)
     t0 = time.perf_counter()
     if anim.registration is None:
         shown, faces, colors = anim.frames, None, None
-    else:  # rendered in the canonical pose, in mm, with the template's colours carried over
+    # rendered in the canonical pose, in mm, with the template's colours carried over
+    else:
         r, shift = anim.registration.pose
         shown = anim.frames * registration.UNITS[mesh.units] @ r.T + shift
         faces, colors = mesh.faces, anim.registration.colors()
-    frames = [np.concatenate(pair, axis=1)
-              for pair in zip(viz.mesh_frames(shown, view="front", faces=faces, colors=colors),
-                              viz.mesh_frames(shown, view="three_quarter", faces=faces, colors=colors))]
+    frames = [
+        np.concatenate(pair, axis=1)
+        for pair in zip(
+            viz.mesh_frames(shown, view="front", faces=faces, colors=colors),
+            viz.mesh_frames(shown, view="three_quarter", faces=faces, colors=colors),
+        )
+    ]
     seconds["render GIF"] = time.perf_counter() - t0
-    used = {"label": args.label, "order": args.order, "steps": steps, "seed": args.seed, "mesh": str(args.mesh),
-            "units": mesh.units}
+    used = {
+        "label": args.label,
+        "order": args.order,
+        "steps": steps,
+        "seed": args.seed,
+        "mesh": str(args.mesh),
+        "units": mesh.units,
+    }
     npz = bytes_io.BytesIO()
-    np.savez(npz, landmarks=anim.landmarks[None].astype(np.float32), config=json.dumps(used))
+    np.savez(
+        npz, landmarks=anim.landmarks[None].astype(np.float32), config=json.dumps(used)
+    )
     extra = {"landmarks.npz": npz.getvalue()}
     if anim.registration is not None:
         extra["registration.json"] = _registration_json(anim.registration).encode()
     t0 = time.perf_counter()
-    written = meshio.write_animation(args.out, anim.frames, viz.gif_bytes(frames, 12), extra=extra, faces=mesh.faces,
-                                     template_meshes=anim.template_frames if args.keep_template else None)
+    written = meshio.write_animation(
+        args.out,
+        anim.frames,
+        viz.gif_bytes(frames, 12),
+        extra=extra,
+        faces=mesh.faces,
+        template_meshes=anim.template_frames if args.keep_template else None,
+    )
     seconds["write files"] = time.perf_counter() - t0
-    print(f"wrote {len(written)} files to {args.out}: {len(anim.frames)} OBJ frames of {mesh.source} "
-          f"({len(mesh.vertices)} vertices, {mesh.units}), animation.gif, {', '.join(sorted(extra))}"
-          + (", template/ (the fitted template's frames)" if args.keep_template else ""))
+    print(
+        f"wrote {len(written)} files to {args.out}: {len(anim.frames)} OBJ frames of"
+        f" {mesh.source} ({len(mesh.vertices)} vertices, {mesh.units}), animation.gif,"
+        f" {', '.join(sorted(extra))}"
+        + (", template/ (the fitted template's frames)" if args.keep_template else "")
+    )
     print("\n".join(f"  {k:<14} {v:7.2f} s" for k, v in seconds.items()))
     print(f"  {'total':<14} {sum(seconds.values()):7.2f} s")
     return 0
 
 
 def _registration_json(fit):
-    """The registration's record: units, the 68 landmarks (user units and pose), residuals (mm), seconds."""
-    return json.dumps({"mesh": fit.mesh.source, "units": fit.mesh.units, "vertices": len(fit.mesh.vertices),
-                       "landmarks": np.round(fit.landmarks, 6).tolist(),
-                       "residual_mm": {k: round(v, 4) for k, v in fit.residual_mm.items()},
-                       "seconds": {k: round(v, 2) for k, v in fit.seconds.items()}}, indent=1) + "\n"
+    """The registration's record: units, the 68 landmarks (user units and pose),
+    residuals (mm), seconds."""
+    return (
+        json.dumps(
+            {
+                "mesh": fit.mesh.source,
+                "units": fit.mesh.units,
+                "vertices": len(fit.mesh.vertices),
+                "landmarks": np.round(fit.landmarks, 6).tolist(),
+                "residual_mm": {k: round(v, 4) for k, v in fit.residual_mm.items()},
+                "seconds": {k: round(v, 2) for k, v in fit.seconds.items()},
+            },
+            indent=1,
+        )
+        + "\n"
+    )
 
 
 def _register(args):
@@ -178,142 +288,370 @@ def _register(args):
         (pathlib.Path(tmp) / record.name).write_text(_registration_json(fit))
         for name in (out.name, record.name):
             os.replace(pathlib.Path(tmp) / name, out.parent / name)
-    print(f"registered {mesh.source} ({len(mesh.vertices)} vertices, {mesh.units}) in "
-          f"{sum(fit.seconds.values()):.1f} s; residual (median, mm): "
-          + ", ".join(f"{k} {v:.2f}" for k, v in fit.residual_mm.items() if "RMS" not in k))
-    print(f"wrote {out} (the template fitted to it, in its units and pose) and {record} (68 landmarks, residuals)")
+    print(
+        f"registered {mesh.source} ({len(mesh.vertices)} vertices, {mesh.units}) in "
+        f"{sum(fit.seconds.values()):.1f} s; residual (median, mm): "
+        + ", ".join(
+            f"{k} {v:.2f}" for k, v in fit.residual_mm.items() if "RMS" not in k
+        )
+    )
+    print(
+        f"wrote {out} (the template fitted to it, in its units and pose) and {record}"
+        " (68 landmarks, residuals)"
+    )
     return 0
 
 
 def _chapter(args):
     mode = "fast" if args.fast else "book"
     path = chapters.find_chapter(args.name)
-    print(f"executing {path.relative_to(config.PROJECT_ROOT)} in {mode} mode ...", flush=True)
+    print(
+        f"executing {path.relative_to(config.PROJECT_ROOT)} in {mode} mode ...",
+        flush=True,
+    )
     seconds, out = chapters.run_chapter(args.name, fast=args.fast)
     budget = chapters.BUDGET_S[mode]
-    print(f"{path.stem}: {seconds:.0f} s in {mode} mode (budget {budget} s{'' if seconds <= budget else ', OVER'}); "
-          f"executed notebook: {out.relative_to(config.PROJECT_ROOT)}")
+    print(
+        f"{path.stem}: {seconds:.0f} s in {mode} mode (budget {budget}"
+        f" s{'' if seconds <= budget else ', OVER'}); executed notebook:"
+        f" {out.relative_to(config.PROJECT_ROOT)}"
+    )
     return 0
 
 
 def _results(args):
     entries = results.catalogue()
     for e in entries:
-        state = "ok" if not e["problems"] else "STALE OR MALFORMED: " + "; ".join(e["problems"])
-        print(f"{e['name']:<24} {e['minutes']:6.1f} min on {e['cores']} cores, {e['threads']} torch thread(s), "
-              f"{e['date']}  {state}\n    {e['command']}")
+        state = (
+            "ok"
+            if not e["problems"]
+            else "STALE OR MALFORMED: " + "; ".join(e["problems"])
+        )
+        print(
+            f"{e['name']:<24} {e['minutes']:6.1f} min on {e['cores']} cores,"
+            f" {e['threads']} torch thread(s), {e['date']}  {state}\n    {e['command']}"
+        )
         for change in e["changes"]:
             print(f"    made before a code change that moves its numbers: {change}")
         if e["unrecorded"]:
-            print(f"    records no {' or '.join(e['unrecorded'])} (stored before results recorded them): "
-                  "its staleness is checked on its checkpoints only")
-    print(f"{len(entries)} stored results in {results.RESULTS_DIR}; re-run a command to rewrite its file")
+            print(
+                f"    records no {' or '.join(e['unrecorded'])} (stored before results"
+                " recorded them): its staleness is checked on its checkpoints only"
+            )
+    print(
+        f"{len(entries)} stored results in {results.RESULTS_DIR}; re-run a command to"
+        " rewrite its file"
+    )
     return 1 if any(e["problems"] for e in entries) else 0
 
 
 def main(argv=None):
     parser = argparse.ArgumentParser(prog="python -m facelib", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
-    p = sub.add_parser("data", help="build (or verify) the synthetic dataset caches and print a summary")
+    p = sub.add_parser(
+        "data",
+        help="build (or verify) the synthetic dataset caches and print a summary",
+    )
     p.add_argument("--name", default="all", choices=["all", *config.DATASETS])
-    p.add_argument("--frames", type=int, default=40, help="frames per sequence (default 40, as in the paper)")
-    p.add_argument("--rebuild", action="store_true", help="regenerate even if a valid cache exists")
-    p.add_argument("--write-fingerprints", action="store_true",
-                   help="record the datasets' fingerprints in data/synthetic/fingerprints.json")
+    p.add_argument(
+        "--frames",
+        type=int,
+        default=40,
+        help="frames per sequence (default 40, as in the paper)",
+    )
+    p.add_argument(
+        "--rebuild", action="store_true", help="regenerate even if a valid cache exists"
+    )
+    p.add_argument(
+        "--write-fingerprints",
+        action="store_true",
+        help="record the datasets' fingerprints in data/synthetic/fingerprints.json",
+    )
     p.set_defaults(func=_data)
 
-    p = sub.add_parser("train", help="train a model and save it in data/checkpoints (.pt + .json); under "
-                       "`torchrun --nproc_per_node N -m facelib train ...` on N processes (distributed data parallel)")
-    p.add_argument("name", choices=[*TRAINABLE, "all"], help="all: every shipped checkpoint with its recipe "
-                   "(training.SHIPPED; --only to pick some, --out a folder to write them to); "
-                   "denoiser: eps_theta of §3.1; guide: the noisy classifier of "
-                   "Alg. 1/4; text_head: BiT(x_t, t) of Alg. 2; evaluator: the independent LSTM classifier of §5; "
-                   "motion3dgan, actor: the baselines of Table 1; motionclip: the baseline of Table 2; lstm_filler: "
-                   "the baseline of Table 3; deformer: the mesh deformation of §3.3 and the baselines of Table 5; "
-                   "au_regressor: R(x_t, t) of AU-curve control (the fine-control chapter)")
-    p.add_argument("--dataset", default=None, choices=list(data.DATASET_NAMES),
-                   help="default: the recipe's (coma; coma+bu for text_head and motionclip, as §5.2)")
-    p.add_argument("--type", default=None, choices=list(data.CLASSIFIER_TYPES), help="guide, evaluator: I = label, "
-                   "S = label x N2E/E2N (default I)")
-    p.add_argument("--variable-length", action="store_true", help="denoiser: train on lengths 35-45 (paper App. A)")
-    p.add_argument("--method", default=None, choices=["ours", "no_attention", "s2d", "coma", "linear"],
-                   help="deformer: a row of Table 5 (default ours)")
-    p.add_argument("--split", default=None, choices=["identity", "expression"], help="deformer: 3 subjects "
-                   "or 3 expressions held out, as §6 (default identity)")
-    p.add_argument("--steps", type=int, default=None, help="training steps (default: the recipe's, facelib/config.py)")
-    p.add_argument("--batch-size", type=int, default=None, help="global batch, split over the processes "
-                   "(default: the recipe's)")
-    p.add_argument("--fast", action="store_true", help="the recipe's fast-mode settings (a few steps, for tests)")
+    p = sub.add_parser(
+        "train",
+        help=(
+            "train a model and save it in data/checkpoints (.pt + .json); under"
+            " `torchrun --nproc_per_node N -m facelib train ...` on N processes"
+            " (distributed data parallel)"
+        ),
+    )
+    p.add_argument(
+        "name",
+        choices=[*TRAINABLE, "all"],
+        help=(
+            "all: every shipped checkpoint with its recipe (training.SHIPPED; --only to"
+            " pick some, --out a folder to write them to); denoiser: eps_theta of §3.1;"
+            " guide: the noisy classifier of Alg. 1/4; text_head: BiT(x_t, t) of Alg."
+            " 2; evaluator: the independent LSTM classifier of §5; motion3dgan, actor:"
+            " the baselines of Table 1; motionclip: the baseline of Table 2;"
+            " lstm_filler: the baseline of Table 3; deformer: the mesh deformation of"
+            " §3.3 and the baselines of Table 5; au_regressor: R(x_t, t) of AU-curve"
+            " control (the fine-control chapter)"
+        ),
+    )
+    p.add_argument(
+        "--dataset",
+        default=None,
+        choices=list(data.DATASET_NAMES),
+        help=(
+            "default: the recipe's (coma; coma+bu for text_head and motionclip, as"
+            " §5.2)"
+        ),
+    )
+    p.add_argument(
+        "--type",
+        default=None,
+        choices=list(data.CLASSIFIER_TYPES),
+        help="guide, evaluator: I = label, S = label x N2E/E2N (default I)",
+    )
+    p.add_argument(
+        "--variable-length",
+        action="store_true",
+        help="denoiser: train on lengths 35-45 (paper App. A)",
+    )
+    p.add_argument(
+        "--method",
+        default=None,
+        choices=["ours", "no_attention", "s2d", "coma", "linear"],
+        help="deformer: a row of Table 5 (default ours)",
+    )
+    p.add_argument(
+        "--split",
+        default=None,
+        choices=["identity", "expression"],
+        help="deformer: 3 subjects or 3 expressions held out, as §6 (default identity)",
+    )
+    p.add_argument(
+        "--steps",
+        type=int,
+        default=None,
+        help="training steps (default: the recipe's, facelib/config.py)",
+    )
+    p.add_argument(
+        "--batch-size",
+        type=int,
+        default=None,
+        help="global batch, split over the processes (default: the recipe's)",
+    )
+    p.add_argument(
+        "--fast",
+        action="store_true",
+        help="the recipe's fast-mode settings (a few steps, for tests)",
+    )
     p.add_argument("--seed", type=int, default=None, help="default: the recipe's (0)")
-    p.add_argument("--device", default=None, choices=["cpu", "cuda"], help="default: a GPU when torch sees one")
-    p.add_argument("--resume", action="store_true", help="continue from <out>.state.pt if a run left one "
-                   "(the state is written every 500 steps; train all: each checkpoint's)")
-    p.add_argument("--conditional", action="store_true", help="denoiser: label-conditional, for classifier-free "
-                   "guidance (labels dropped with probability config.DenoiserTraining.condition_dropout; checkpoint "
-                   "denoiser_<dataset>_cfg)")
-    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="any other setting of the "
-                   "recipe (facelib/config.py; repeatable), e.g. denoiser: --set prediction=v --set min_snr_gamma=5 "
-                   "--set mirror=0.5 --set schedule=cosine; 'none' for None")
-    p.add_argument("--only", nargs="+", default=None, help="train all: only these shipped checkpoints")
-    p.add_argument("--missing", action="store_true", help="train all: skip the checkpoints that exist and were "
-                   "trained on this world's datasets (config.WORLD)")
-    p.add_argument("--out", default=None, help="checkpoint name or path stem (default: denoiser_<dataset>[_var], "
-                   "guide_<dataset>_<type>, ic_<dataset>_<type>, deform_<method>_<split>, <baseline>_<dataset>); "
-                   f"train all: a folder (default {config.CHECKPOINT_DIR})")
+    p.add_argument(
+        "--device",
+        default=None,
+        choices=["cpu", "cuda"],
+        help="default: a GPU when torch sees one",
+    )
+    p.add_argument(
+        "--resume",
+        action="store_true",
+        help=(
+            "continue from <out>.state.pt if a run left one "
+            "(the state is written every 500 steps; train all: each checkpoint's)"
+        ),
+    )
+    p.add_argument(
+        "--conditional",
+        action="store_true",
+        help=(
+            "denoiser: label-conditional, for classifier-free guidance (labels dropped"
+            " with probability config.DenoiserTraining.condition_dropout; checkpoint"
+            " denoiser_<dataset>_cfg)"
+        ),
+    )
+    p.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help=(
+            "any other setting of the recipe (facelib/config.py; repeatable), e.g."
+            " denoiser: --set prediction=v --set min_snr_gamma=5 --set mirror=0.5 --set"
+            " schedule=cosine; 'none' for None"
+        ),
+    )
+    p.add_argument(
+        "--only",
+        nargs="+",
+        default=None,
+        help="train all: only these shipped checkpoints",
+    )
+    p.add_argument(
+        "--missing",
+        action="store_true",
+        help=(
+            "train all: skip the checkpoints that exist and were "
+            "trained on this world's datasets (config.WORLD)"
+        ),
+    )
+    p.add_argument(
+        "--out",
+        default=None,
+        help=(
+            "checkpoint name or path stem (default: denoiser_<dataset>[_var],"
+            " guide_<dataset>_<type>, ic_<dataset>_<type>, deform_<method>_<split>,"
+            " <baseline>_<dataset>); train all: a folder (default"
+            f" {config.CHECKPOINT_DIR})"
+        ),
+    )
     p.set_defaults(func=_train)
 
     cli_sample.add_parsers(sub)
 
-    p = sub.add_parser("neutral", help="write the neutral mesh of a new synthetic identity as OBJ (template topology)")
+    p = sub.add_parser(
+        "neutral",
+        help=(
+            "write the neutral mesh of a new synthetic identity as OBJ (template"
+            " topology)"
+        ),
+    )
     p.add_argument("--seed", type=int, default=0, help="identity seed")
     p.add_argument("--out", required=True, help="output .obj")
     p.set_defaults(func=_neutral)
 
-    p = sub.add_parser("animate", help="animate a neutral mesh: landmarks, geometry-adaptive generation (Alg. 4), "
-                       "deformation (§3.3); writes an OBJ per frame, animation.gif and landmarks.npz")
-    p.add_argument("--mesh", required=True, help="a neutral face mesh (OBJ, PLY, STL or OFF) of any topology, units "
-                   "and pose: registered to the template first (see `register`), the frames written on its own "
-                   "vertices; a template mesh in the canonical pose (from `neutral`) is animated as it is")
-    p.add_argument("--units", default=None, choices=list(registration.UNITS), help="the mesh's units (default: "
-                   "detected from its size)")
-    p.add_argument("--keep-template", action="store_true", help="also write the fitted template's frames "
-                   "(template/frame_*.obj, mm, canonical pose)")
-    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="any setting of the "
-                   "registration (config.Registration; repeatable), e.g. --set samples=20000 --set "
-                   "max_residual_mm=4")
-    p.add_argument("--label", required=True, help="expression label of the CoMA-like set, e.g. high_smile")
-    p.add_argument("--order", default="N2E", choices=["N2E", "E2N"], help="neutral face first (N2E) or last (E2N)")
-    p.add_argument("--steps", type=int, default=None, help="reverse steps per pass of Alg. 4 (default: "
-                   "config.GeometryAdaptive: 100, the book's respaced chain)")
+    p = sub.add_parser(
+        "animate",
+        help=(
+            "animate a neutral mesh: landmarks, geometry-adaptive generation (Alg. 4),"
+            " deformation (§3.3); writes an OBJ per frame, animation.gif and"
+            " landmarks.npz"
+        ),
+    )
+    p.add_argument(
+        "--mesh",
+        required=True,
+        help=(
+            "a neutral face mesh (OBJ, PLY, STL or OFF) of any topology, units and"
+            " pose: registered to the template first (see `register`), the frames"
+            " written on its own vertices; a template mesh in the canonical pose (from"
+            " `neutral`) is animated as it is"
+        ),
+    )
+    p.add_argument(
+        "--units",
+        default=None,
+        choices=list(registration.UNITS),
+        help="the mesh's units (default: detected from its size)",
+    )
+    p.add_argument(
+        "--keep-template",
+        action="store_true",
+        help=(
+            "also write the fitted template's frames "
+            "(template/frame_*.obj, mm, canonical pose)"
+        ),
+    )
+    p.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help=(
+            "any setting of the registration (config.Registration; repeatable), e.g."
+            " --set samples=20000 --set max_residual_mm=4"
+        ),
+    )
+    p.add_argument(
+        "--label",
+        required=True,
+        help="expression label of the CoMA-like set, e.g. high_smile",
+    )
+    p.add_argument(
+        "--order",
+        default="N2E",
+        choices=["N2E", "E2N"],
+        help="neutral face first (N2E) or last (E2N)",
+    )
+    p.add_argument(
+        "--steps",
+        type=int,
+        default=None,
+        help=(
+            "reverse steps per pass of Alg. 4 (default: "
+            "config.GeometryAdaptive: 100, the book's respaced chain)"
+        ),
+    )
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--out", required=True, help="output folder (written all at once, or not at all)")
+    p.add_argument(
+        "--out",
+        required=True,
+        help="output folder (written all at once, or not at all)",
+    )
     p.set_defaults(func=_animate)
 
-    p = sub.add_parser("register", help="fit the template to a face mesh of any topology, units and pose (rigid "
-                       "alignment, the identity model, non-rigid ICP); writes the fitted template (OBJ, in the mesh's "
-                       "units and pose) and a JSON with its 68 landmarks and the fit's residuals")
-    p.add_argument("--mesh", required=True, help="a neutral face mesh: OBJ, PLY, STL or OFF")
-    p.add_argument("--units", default=None, choices=list(registration.UNITS), help="the mesh's units (default: "
-                   "detected from its size)")
-    p.add_argument("--out", required=True, help="output .obj (the landmarks and residuals go beside it as .json)")
-    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="any setting of the "
-                   "registration (config.Registration; repeatable), e.g. --set samples=20000 --set "
-                   "max_residual_mm=4")
+    p = sub.add_parser(
+        "register",
+        help=(
+            "fit the template to a face mesh of any topology, units and pose (rigid"
+            " alignment, the identity model, non-rigid ICP); writes the fitted template"
+            " (OBJ, in the mesh's units and pose) and a JSON with its 68 landmarks and"
+            " the fit's residuals"
+        ),
+    )
+    p.add_argument(
+        "--mesh", required=True, help="a neutral face mesh: OBJ, PLY, STL or OFF"
+    )
+    p.add_argument(
+        "--units",
+        default=None,
+        choices=list(registration.UNITS),
+        help="the mesh's units (default: detected from its size)",
+    )
+    p.add_argument(
+        "--out",
+        required=True,
+        help="output .obj (the landmarks and residuals go beside it as .json)",
+    )
+    p.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help=(
+            "any setting of the registration (config.Registration; repeatable), e.g."
+            " --set samples=20000 --set max_residual_mm=4"
+        ),
+    )
     p.set_defaults(func=_register)
 
-    p = sub.add_parser("chapter", help="execute one chapter (book mode unless --fast), print its time; the executed "
-                       "notebook goes to _build/chapters/ (make chapter N=05)")
-    p.add_argument("name", help="chapter number (05), file stem (05_label_control) or name (label_control)")
-    p.add_argument("--fast", action="store_true", help="fast mode (FACELIB_FAST=1), as the tests run it")
+    p = sub.add_parser(
+        "chapter",
+        help=(
+            "execute one chapter (book mode unless --fast), print its time; the"
+            " executed notebook goes to _build/chapters/ (make chapter N=05)"
+        ),
+    )
+    p.add_argument(
+        "name",
+        help=(
+            "chapter number (05), file stem (05_label_control) or name (label_control)"
+        ),
+    )
+    p.add_argument(
+        "--fast",
+        action="store_true",
+        help="fast mode (FACELIB_FAST=1), as the tests run it",
+    )
     p.set_defaults(func=_chapter)
 
-    p = sub.add_parser("results", help="list the stored full-scale results (results/*.json): wall time, date, "
-                       "whether each is fresh, and the command that rewrites it")
+    p = sub.add_parser(
+        "results",
+        help=(
+            "list the stored full-scale results (results/*.json): wall time, date, "
+            "whether each is fresh, and the command that rewrites it"
+        ),
+    )
     p.set_defaults(func=_results)
     args = parser.parse_args(argv)
     try:
         return args.func(args)
-    except (ValueError, FileNotFoundError) as e:  # bad input, a checkpoint not trained yet: a message, no traceback
+    # bad input, a checkpoint not trained yet: a message, no traceback
+    except (ValueError, FileNotFoundError) as e:
         parser.error(str(e))
 
 

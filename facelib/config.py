@@ -1,9 +1,11 @@
-"""Every default of the book in one place: paper values, CPU-scaled values, fast-mode values.
+"""Every default of the book in one place: paper values, CPU-scaled values, fast-mode
+values.
 
 Each value carries its source: the paper section, or "our choice" with the reason.
-``FACELIB_FAST=1`` (set by ``make test``) selects the fast-mode values so that every notebook
-executes in seconds; the default ("book") mode uses the full values.
+``FACELIB_FAST=1`` (set by ``make test``) selects the fast-mode values so that every
+notebook executes in seconds; the default ("book") mode uses the full values.
 """
+
 from __future__ import annotations
 
 import os
@@ -14,32 +16,42 @@ PROJECT_ROOT = Path(__file__).resolve().parent.parent
 NUM_LANDMARKS = 68  # the iBUG-68 landmarks a frame holds (paper §3.1)
 NUM_FRAMES = 40  # frames per sequence (paper §4)
 NUM_DIFFUSION_STEPS = 2000  # T of the paper's chain (paper §4)
-# The shipped checkpoints and dataset fingerprints live in the repository's data/, not in the package: `pip install
-# .` installs code only, and FACELIB_DATA_DIR then names a clone's data/ (checkpoints.load_checkpoint says so).
+# The shipped checkpoints and dataset fingerprints live in the repository's data/, not
+# in the package: `pip install .` installs code only, and FACELIB_DATA_DIR then names a
+# clone's data/ (checkpoints.load_checkpoint says so).
 DATA_DIR = Path(os.environ.get("FACELIB_DATA_DIR", PROJECT_ROOT / "data"))
 
-# The synthetic world's version.  Version 2 (issue 25; facelib/face/tissue.py: tissue mechanics, magnitudes
-# calibrated to published measurements of real faces) replaced version 1, whose faces moved far less than
-# real ones.  The dataset caches are named after the version, and every checkpoint records it with the
-# datasets' fingerprint: one of another version is refused with the command that retrains it
-# (checkpoints.check_world), and a stored result whose checkpoints changed is flagged stale (tests/test_results.py).
-# ``face.Face(..., world=1)`` remains only for chapter 01's comparison of the two versions (WORLDS).
+# The synthetic world's version.  Version 2 (issue 25; facelib/face/tissue.py: tissue
+# mechanics, magnitudes calibrated to published measurements of real faces) replaced
+# version 1, whose faces moved far less than real ones.  The dataset caches are named
+# after the version, and every checkpoint records it with the datasets' fingerprint: one
+# of another version is refused with the command that retrains it
+# (checkpoints.check_world), and a stored result whose checkpoints changed is flagged
+# stale (tests/test_results.py). ``face.Face(..., world=1)`` remains only for chapter
+# 01's comparison of the two versions (WORLDS).
 WORLD = 2
 WORLDS = (1, 2)
 SYNTHETIC_DIR = DATA_DIR / "synthetic"
-# Checkpoints live in a folder named after the world version they were trained on: a retrain on a new version
-# writes beside the old ones until it replaces them.
+# Checkpoints live in a folder named after the world version they were trained on: a
+# retrain on a new version writes beside the old ones until it replaces them.
 CHECKPOINT_DIR = DATA_DIR / "checkpoints" / f"world{WORLD}"
 RESULTS_DIR = PROJECT_ROOT / "results"
 
 
 def fast_mode():
-    """True when FACELIB_FAST is set to a true value (1/true/yes): small, quick runs for tests."""
-    return os.environ.get("FACELIB_FAST", "").strip().lower() in ("1", "true", "yes", "on")
+    """True when FACELIB_FAST is set to a true value (1/true/yes): small, quick runs for
+    tests."""
+    return os.environ.get("FACELIB_FAST", "").strip().lower() in (
+        "1",
+        "true",
+        "yes",
+        "on",
+    )
 
 
 def cache_dir():
-    """Where generated datasets are cached: $FACELIB_CACHE_DIR or data/synthetic/cache (every world's)."""
+    """Where generated datasets are cached: $FACELIB_CACHE_DIR or data/synthetic/cache
+    (every world's)."""
     return Path(os.environ.get("FACELIB_CACHE_DIR", DATA_DIR / "synthetic" / "cache"))
 
 
@@ -52,9 +64,11 @@ class DatasetSpec:
     num_subjects: int
     num_sequences: int
     num_test_subjects: int  # subjects held out for the "test" split
-    takes_per_pair: int  # base number of sequences per (subject, label), N2E and E2N alternating
+    # base number of sequences per (subject, label), N2E and E2N alternating
+    takes_per_pair: int
     seed: int
-    style_gain_sigma: float  # how differently subjects perform a label (expressions.StyleSpread)
+    # how differently subjects perform a label (expressions.StyleSpread)
+    style_gain_sigma: float
     style_leak_probability: float
     style_leak_max: float
     style_blend_max: float
@@ -62,37 +76,64 @@ class DatasetSpec:
 
 
 DATASETS = {
-    # Paper §4: 689 CoMA sequences from 12 subjects performing 12 actions.  CoMA's labels are
-    # instructions ("lips up") that subjects interpret freely: our choice of a wide style spread
-    # makes them as hard to recognise on unseen subjects as the paper's GT row (83.8 %).  World 2's
-    # broad, saturating expressions blur the labels into each other more than world 1's did (the IC read
-    # 76 % with a blend of 0.3): mixing at most 0.22 of another label in keeps the ground truth near
-    # 83.8 %.  Our choice: 4 takes per (subject, label) plus one extra take for 113 random pairs gives
-    # exactly 689; 3 subjects (a quarter) are held out for testing.
-    "coma": DatasetSpec("coma", "coma", num_subjects=12, num_sequences=689, num_test_subjects=3,
-                        takes_per_pair=4, seed=1001, style_gain_sigma=0.45, style_leak_probability=0.9,
-                        style_leak_max=0.4, style_blend_max=0.22),
-    # Paper §4: 606 BU-4DFE recordings of 101 subjects x 6 emotions, each cut into an N2E and an
-    # E2N sequence: 1212 sequences.  Our choice: 20 subjects held out for testing.
-    "bu": DatasetSpec("bu", "bu", num_subjects=101, num_sequences=1212, num_test_subjects=20,
-                      takes_per_pair=2, seed=2002, style_gain_sigma=0.25, style_leak_probability=0.5,
-                      style_leak_max=0.2, style_blend_max=0.2),
+    # Paper §4: 689 CoMA sequences from 12 subjects performing 12 actions.  CoMA's
+    # labels are instructions ("lips up") that subjects interpret freely: our choice of
+    # a wide style spread makes them as hard to recognise on unseen subjects as the
+    # paper's GT row (83.8 %).  World 2's broad, saturating expressions blur the labels
+    # into each other more than world 1's did (the IC read 76 % with a blend of 0.3):
+    # mixing at most 0.22 of another label in keeps the ground truth near
+    # 83.8 %.  Our choice: 4 takes per (subject, label) plus one extra take for 113
+    # random pairs gives exactly 689; 3 subjects (a quarter) are held out for testing.
+    "coma": DatasetSpec(
+        "coma",
+        "coma",
+        num_subjects=12,
+        num_sequences=689,
+        num_test_subjects=3,
+        takes_per_pair=4,
+        seed=1001,
+        style_gain_sigma=0.45,
+        style_leak_probability=0.9,
+        style_leak_max=0.4,
+        style_blend_max=0.22,
+    ),
+    # Paper §4: 606 BU-4DFE recordings of 101 subjects x 6 emotions, each cut into an
+    # N2E and an E2N sequence: 1212 sequences.  Our choice: 20 subjects held out for
+    # testing.
+    "bu": DatasetSpec(
+        "bu",
+        "bu",
+        num_subjects=101,
+        num_sequences=1212,
+        num_test_subjects=20,
+        takes_per_pair=2,
+        seed=2002,
+        style_gain_sigma=0.25,
+        style_leak_probability=0.5,
+        style_leak_max=0.2,
+        style_blend_max=0.2,
+    ),
 }
 SPLITS = ("train", "test", "all")
 
 
-# ==================================================================================== training
-# Every model is trained by the one loop of facelib/training/loop.py; these are its recipes' settings.
-# A field's comment says where its value comes from: the paper (§, Eq.) or "our choice" and why.
+# ====================================================================================
+# training Every model is trained by the one loop of facelib/training/loop.py; these are
+# its recipes' settings. A field's comment says where its value comes from: the paper
+# (§, Eq.) or "our choice" and why.
 OPTIMIZERS = ("adam", "adamw")
-# What a denoiser's network outputs (models.denoiser converts each to eps): the noise (paper, Eq. 8), the clean
-# sequence x_0 (MDM, Tevet et al. 2023) or the velocity v = sqrt(abar_t) eps - sqrt(1 - abar_t) x_0 (Salimans & Ho 2022)
+# What a denoiser's network outputs (models.denoiser converts each to eps): the noise
+# (paper, Eq. 8), the clean sequence x_0 (MDM, Tevet et al. 2023) or the velocity v =
+# sqrt(abar_t) eps - sqrt(1 - abar_t) x_0 (Salimans & Ho 2022)
 PREDICTIONS = ("eps", "x0", "v")
 
 
 def check_prediction(prediction):
     if prediction not in PREDICTIONS:
-        raise ValueError(f"unknown prediction target {prediction!r}; allowed: {', '.join(PREDICTIONS)}")
+        raise ValueError(
+            f"unknown prediction target {prediction!r}; allowed:"
+            f" {', '.join(PREDICTIONS)}"
+        )
 
 
 def _check_positive_int(name, value):
@@ -102,14 +143,16 @@ def _check_positive_int(name, value):
 
 @dataclass(frozen=True)
 class Optimisation:
-    """How the training loop optimises (the fields every recipe shares; each recipe sets its own values).
+    """How the training loop optimises (the fields every recipe shares; each recipe sets
+    its own values).
 
-    The learning rate rises linearly over ``warmup`` steps, then follows a cosine from ``lr`` down to
-    ``lr * final_lr_fraction`` (1.0: constant).  ``grad_clip``: clip the gradient norm (None: no clipping).
-    ``ema_decay``: keep an exponential moving average of the weights and return it (None: no EMA).
-    ``epochs``: None draws each of the ``steps`` batches uniformly with replacement; an integer walks
-    that many times through a new permutation of the data (the last batch of a pass may be smaller),
-    and the number of steps follows from the data's size."""
+    The learning rate rises linearly over ``warmup`` steps, then follows a cosine from
+    ``lr`` down to ``lr * final_lr_fraction`` (1.0: constant).  ``grad_clip``: clip the
+    gradient norm (None: no clipping). ``ema_decay``: keep an exponential moving average
+    of the weights and return it (None: no EMA). ``epochs``: None draws each of the
+    ``steps`` batches uniformly with replacement; an integer walks that many times
+    through a new permutation of the data (the last batch of a pass may be smaller), and
+    the number of steps follows from the data's size."""
 
     steps: int = 1000
     batch_size: int = 64
@@ -128,18 +171,29 @@ class Optimisation:
         _check_positive_int("steps", self.steps)
         _check_positive_int("batch_size", self.batch_size)
         if self.optimizer not in OPTIMIZERS:
-            raise ValueError(f"optimizer must be one of {OPTIMIZERS}, got {self.optimizer!r}")
+            raise ValueError(
+                f"optimizer must be one of {OPTIMIZERS}, got {self.optimizer!r}"
+            )
         if self.epochs is not None:
             _check_positive_int("epochs", self.epochs)
         if not isinstance(self.warmup, int) or not 0 <= self.warmup < self.steps:
-            raise ValueError(f"warmup must be an integer in 0..steps-1 = {self.steps - 1}, got {self.warmup!r}")
+            raise ValueError(
+                f"warmup must be an integer in 0..steps-1 = {self.steps - 1}, got"
+                f" {self.warmup!r}"
+            )
         if not self.lr > 0 or not 0 <= self.final_lr_fraction <= 1:
-            raise ValueError(f"need lr > 0 and final_lr_fraction in [0, 1], got {self.lr}, {self.final_lr_fraction}")
+            raise ValueError(
+                f"need lr > 0 and final_lr_fraction in [0, 1], got {self.lr},"
+                f" {self.final_lr_fraction}"
+            )
         if self.ema_decay is not None and not 0 < self.ema_decay < 1:
-            raise ValueError(f"ema_decay must be in (0, 1) or None, got {self.ema_decay}")
+            raise ValueError(
+                f"ema_decay must be in (0, 1) or None, got {self.ema_decay}"
+            )
 
     def with_steps(self, steps):
-        """The same recipe for ``steps`` steps, its warm-up kept at most a tenth of the run."""
+        """The same recipe for ``steps`` steps, its warm-up kept at most a tenth of the
+        run."""
         return replace(self, steps=steps, warmup=min(self.warmup, steps // 10))
 
     def fast(self):
@@ -209,24 +263,30 @@ class DenoiserTraining(Optimisation):
 
 @dataclass(frozen=True)
 class GuideTraining(Optimisation):
-    """The guidance classifiers p_phi(y | x_t, t) of Alg. 1 (type I) and Alg. 4 (type S)."""
+    """The guidance classifiers p_phi(y | x_t, t) of Alg. 1 (type I) and Alg. 4 (type
+    S)."""
 
-    steps: int = 3000  # our choice: ~3 min on 2 CPU cores; accuracy against t is shown in the label-control chapter
+    # our choice: ~3 min on 2 CPU cores; accuracy against t is shown in the
+    # label-control chapter
+    steps: int = 3000
     lr: float = 3e-4
     warmup: int = 200
     final_lr_fraction: float = 0.05
     weight_decay: float = 0.01
     grad_clip: float | None = 1.0
     dataset: str = "coma"
-    classifier_type: str = "I"  # paper §5.1: type I for label control, type S for Alg. 4
-    num_diffusion_steps: int = NUM_DIFFUSION_STEPS  # the DDPM's schedule (paper §4): x_t must look like the sampler's
+    # paper §5.1: type I for label control, type S for Alg. 4
+    classifier_type: str = "I"
+    # the DDPM's schedule (paper §4): x_t must look like the sampler's
+    num_diffusion_steps: int = NUM_DIFFUSION_STEPS
     schedule: str = "linear"
 
 
 @dataclass(frozen=True)
 class AURegressorTraining(Optimisation):
-    """The noisy AU-intensity regressor R(x_t, t) of the fine-control chapter (not in the paper): the mean
-    squared error of its per-frame AU intensities against the curves that made x_0."""
+    """The noisy AU-intensity regressor R(x_t, t) of the fine-control chapter (not in
+    the paper): the mean squared error of its per-frame AU intensities against the
+    curves that made x_0."""
 
     steps: int = 3000  # our choice: the guidance classifier's budget
     lr: float = 3e-4
@@ -235,7 +295,8 @@ class AURegressorTraining(Optimisation):
     weight_decay: float = 0.01
     grad_clip: float | None = 1.0
     dataset: str = "coma"  # the unconditional DDPM it steers (denoiser_coma)
-    num_diffusion_steps: int = NUM_DIFFUSION_STEPS  # the DDPM's schedule: x_t must look like the sampler's
+    # the DDPM's schedule: x_t must look like the sampler's
+    num_diffusion_steps: int = NUM_DIFFUSION_STEPS
     schedule: str = "linear"
 
 
@@ -250,15 +311,18 @@ class TextHeadTraining(Optimisation):
     weight_decay: float = 0.01
     grad_clip: float | None = 1.0
     dataset: str = "coma+bu"  # paper §5.2: CoMA and BU-4DFE merged (18 actions)
-    contrastive_weight: float = 1.0  # our addition (0 = the paper's cosine loss alone): see training.recipes
-    temperature: float = 0.05  # of the contrastive term (CLIP learns 0.01; 0.07 at its start)
+    # our addition (0 = the paper's cosine loss alone): see training.recipes
+    contrastive_weight: float = 1.0
+    # of the contrastive term (CLIP learns 0.01; 0.07 at its start)
+    temperature: float = 0.05
     num_diffusion_steps: int = NUM_DIFFUSION_STEPS
     schedule: str = "linear"
 
 
 @dataclass(frozen=True)
 class EvaluatorTraining(Optimisation):
-    """The independent classifier (IC) of the evaluation (§5): Adam, 30 epochs (our choices)."""
+    """The independent classifier (IC) of the evaluation (§5): Adam, 30 epochs (our
+    choices)."""
 
     epochs: int | None = 30  # our choice: the loss has flattened
     batch_size: int = 32
@@ -267,7 +331,9 @@ class EvaluatorTraining(Optimisation):
     dataset: str = "coma"
     classifier_type: str = "I"
     hidden: int = 128  # §5: one LSTM layer; its width is our choice
-    inputs: str = "motion"  # the face-world chapter: motion generalises to unseen faces, absolute coordinates do not
+    # the face-world chapter: motion generalises to unseen faces, absolute coordinates
+    # do not
+    inputs: str = "motion"
 
     def fast(self):
         return replace(self, epochs=2)
@@ -277,15 +343,18 @@ class EvaluatorTraining(Optimisation):
 class ActorTraining(Optimisation):
     """The ACTOR-style transformer CVAE baseline of Table 1."""
 
-    # Issue 25: the same compute and parameter budget as the denoiser had then (12,000 steps; three decoder
-    # layers, 596 k parameters against its 616 k), and the KL weight of the tuning sweep.  Issue 43
-    # doubled the denoiser's steps; the ACTOR baseline keeps its 12,000.
+    # Issue 25: the same compute and parameter budget as the denoiser had then (12,000
+    # steps; three decoder layers, 596 k parameters against its 616 k), and the KL
+    # weight of the tuning sweep.  Issue 43 doubled the denoiser's steps; the ACTOR
+    # baseline keeps its 12,000.
     steps: int = 12000
-    lr: float = 1e-3  # our choice: at 2e-4 the decoder underfits in this budget and ignores the label
+    # our choice: at 2e-4 the decoder underfits in this budget and ignores the label
+    lr: float = 1e-3
     weight_decay: float = 0.01  # torch's AdamW default
     dataset: str = "coma"
-    # The tuning sweep's pick (ACTOR: 1e-5 with its loss scaling; benchmarks/baseline_sweep.py: best
-    # accuracy - 2 FID among 1e-3, 1e-2, 3e-2 at a quarter budget; results/baseline_sweep.json).
+    # The tuning sweep's pick (ACTOR: 1e-5 with its loss scaling;
+    # benchmarks/baseline_sweep.py: best accuracy - 2 FID among 1e-3, 1e-2, 3e-2 at a
+    # quarter budget; results/baseline_sweep.json).
     kl_weight: float = 1e-2
     depth: int = 3  # transformer layers of the encoder and of the decoder
 
@@ -294,7 +363,8 @@ class ActorTraining(Optimisation):
 class MotionClipTraining(Optimisation):
     """The MotionCLIP-style text-to-motion decoder of Table 2."""
 
-    steps: int = 3000  # our choice: a few minutes on 2 CPU cores; the loss has flattened by then
+    # our choice: a few minutes on 2 CPU cores; the loss has flattened by then
+    steps: int = 3000
     lr: float = 1e-3
     weight_decay: float = 0.01  # torch's AdamW default
     dataset: str = "coma+bu"  # paper §5.2
@@ -304,11 +374,13 @@ class MotionClipTraining(Optimisation):
 class Motion3DGANTraining(Optimisation):
     """The Motion3DGAN-style WGAN-GP on SRVFs of Table 1 (Otberdout et al.)."""
 
-    # Issue 25: the denoiser's parameter budget (160 channels: a 643 k-parameter generator against its
-    # 616 k) and a comparable compute budget (3,000 generator steps, 15,000 critic steps).
+    # Issue 25: the denoiser's parameter budget (160 channels: a 643 k-parameter
+    # generator against its 616 k) and a comparable compute budget (3,000 generator
+    # steps, 15,000 critic steps).
     steps: int = 3000  # generator steps
-    # The tuning sweep's pick (benchmarks/baseline_sweep.py: best accuracy - 2 FID among 1e-4 ... 5e-3 at a
-    # quarter budget; the Motion3DGAN paper's 1e-4 reads 12 %, 2e-3 60 %).
+    # The tuning sweep's pick (benchmarks/baseline_sweep.py: best accuracy - 2 FID among
+    # 1e-4 ... 5e-3 at a quarter budget; the Motion3DGAN paper's 1e-4 reads 12 %, 2e-3
+    # 60 %).
     lr: float = 2e-3
     optimizer: str = "adam"
     betas: tuple = (0.5, 0.9)  # WGAN-GP's Adam
@@ -317,7 +389,9 @@ class Motion3DGANTraining(Optimisation):
     gp_weight: float = 10.0  # lambda of Eq. 4 (WGAN-GP default; not given)
     adversarial_weight: float = 1.0  # alpha_1 (the Motion3DGAN paper)
     reconstruction_weight: float = 10.0  # alpha_2 (the Motion3DGAN paper)
-    smoothing: float = 1.0  # our choice: Gaussian sigma (frames) applied before the SRVF (models.motion3dgan.prepare)
+    # our choice: Gaussian sigma (frames) applied before the SRVF
+    # (models.motion3dgan.prepare)
+    smoothing: float = 1.0
     channels: int = 160  # of the generator's and the critic's convolutions
 
 
@@ -325,20 +399,23 @@ class Motion3DGANTraining(Optimisation):
 class LSTMFillerTraining(Optimisation):
     """The bidirectional-LSTM filler of Table 3 (Berson et al.: Adam, lr 1e-3)."""
 
-    steps: int = 1500  # our choice: ~9 min on one CPU core (a 2x40-step BiLSTM is sequential)
+    # our choice: ~9 min on one CPU core (a 2x40-step BiLSTM is sequential)
+    steps: int = 1500
     lr: float = 1e-3
     optimizer: str = "adam"
     dataset: str = "coma"
     alpha_gt: float = 10.0  # Berson et al.'s weight of the known frames
 
 
-# §6: the deformation experiments use CoMA.  Our choice (issue 25): the faces of both datasets, 90
-# training identities, so that the deformers can learn how identity changes the deformation.
+# §6: the deformation experiments use CoMA.  Our choice (issue 25): the faces of both
+# datasets, 90 training identities, so that the deformers can learn how identity changes
+# the deformation.
 DEFORMATION_DATASET = "coma+bu"
-# §6's expression split holds out 3 expressions; the paper does not name them.  Our choice: one smile, one jaw
-# opening and a pucker, each with relatives left in training.  Not the asymmetric mouth_side, whose sideways
-# jaw (AD30) no other label has: holding it out would test extrapolation to an action unit never seen, not
-# generalisation to a new combination.
+# §6's expression split holds out 3 expressions; the paper does not name them.  Our
+# choice: one smile, one jaw opening and a pucker, each with relatives left in training.
+# Not the asymmetric mouth_side, whose sideways jaw (AD30) no other label has: holding
+# it out would test extrapolation to an action unit never seen, not generalisation to a
+# new combination.
 HELD_OUT_EXPRESSIONS = ("high_smile", "mouth_open", "mouth_middle")
 
 
@@ -346,9 +423,11 @@ HELD_OUT_EXPRESSIONS = ("high_smile", "mouth_open", "mouth_middle")
 class DeformationTraining(Optimisation):
     """The deformation networks of Table 5 (S2D: Adam, lr 1e-3, batch 16 meshes)."""
 
-    # Our choice: 90 training faces give many pairs; 10,000 steps are 10 to 19 minutes on one core.
+    # Our choice: 90 training faces give many pairs; 10,000 steps are 10 to 19 minutes
+    # on one core.
     steps: int = 10000
-    batch_size: int = 4  # sequences per batch (our choice), frames_per_batch meshes each: S2D's 16
+    # sequences per batch (our choice), frames_per_batch meshes each: S2D's 16
+    batch_size: int = 4
     lr: float = 1e-3  # S2D
     optimizer: str = "adam"
     final_lr_fraction: float = 0.1  # our choice: cosine decay to lr / 10
@@ -362,64 +441,80 @@ class DeformationTraining(Optimisation):
         return replace(self, steps=20, max_sequences=16, frames_per_sequence=4)
 
 
-# ==================================================================================== sampling tasks
-# Guidance (paper §3.2, §4) and the book's choices, named once.  Each task below gathers its defaults
-# in a frozen dataclass: the book's best measured settings; ``paper()`` gives the paper's printed
-# algorithm (``--paper``) and ``fast()`` a few steps (tests, FACELIB_FAST chapters).
-# steps: reverse steps of a chain respaced from the paper's T = 2000 (None: all 2000).
+# ====================================================================================
+# sampling tasks Guidance (paper §3.2, §4) and the book's choices, named once.  Each
+# task below gathers its defaults in a frozen dataclass: the book's best measured
+# settings; ``paper()`` gives the paper's printed algorithm (``--paper``) and ``fast()``
+# a few steps (tests, FACELIB_FAST chapters). steps: reverse steps of a chain respaced
+# from the paper's T = 2000 (None: all 2000).
 ADAGRAD_STEPS = 3  # paper §3.2: "3 steps of the Adagrad update for each diffusion step"
 GUIDANCE_WEIGHT = 0.01  # paper §4: lambda = 0.01 "as in [51]"
-GUIDANCE_METHODS = ("adagrad", "mean_shift")  # Alg. 1; classic classifier guidance (Dhariwal & Nichol)
-# What steers label control: a noisy classifier on the unconditional denoiser (the paper's), or classifier-free
-# guidance (Ho & Salimans 2022), a label-conditional denoiser with no classifier (DenoiserTraining.conditional)
+# Alg. 1; classic classifier guidance (Dhariwal & Nichol)
+GUIDANCE_METHODS = ("adagrad", "mean_shift")
+# What steers label control: a noisy classifier on the unconditional denoiser (the
+# paper's), or classifier-free guidance (Ho & Salimans 2022), a label-conditional
+# denoiser with no classifier (DenoiserTraining.conditional)
 LABEL_GUIDANCE = ("classifier", "cfg")
-# The mean shift's gradient scale s: at 1 (Dhariwal & Nichol's) it steers too weakly here; 10 is the book's pick
-# (results/fast_sampling_guidance.json: s = 1, 3, 10, 30 with both samplers at 50 and 200 steps)
+# The mean shift's gradient scale s: at 1 (Dhariwal & Nichol's) it steers too weakly
+# here; 10 is the book's pick (results/fast_sampling_guidance.json: s = 1, 3, 10, 30
+# with both samplers at 50 and 200 steps)
 MEAN_SHIFT_SCALE = 10.0
 CFG_SCALE = 2.5  # classifier-free guidance's weight w: MDM's (Tevet et al. 2023)
-# The mean shift's scale for editing (config.Edit; our choice): 20, where 3 edits in 4 read the new label with the
-# neutral frame kept (results/fast_sampling_edit.json: 56 % at 10, 75 % at 20, 88 % at 30; the first regenerated
-# frame then steps 0.6, 1.3 and 1.7 mm further from the neutral one than the original's does)
+# The mean shift's scale for editing (config.Edit; our choice): 20, where 3 edits in 4
+# read the new label with the neutral frame kept (results/fast_sampling_edit.json: 56 %
+# at 10, 75 % at 20, 88 % at 30; the first regenerated frame then steps 0.6, 1.3 and 1.7
+# mm further from the neutral one than the original's does)
 EDIT_MEAN_SHIFT_SCALE = 20.0
-# Alg. 1's Adagrad learning rate, per dataset, for a chain of LR_REFERENCE_STEPS reverse steps: not in the
-# paper; each is the pick of the label-control chapter's sweep (48 guided sequences per rate, 200 steps, best
-# accuracy - 2 FID).
-# A rate is a step length in the normalised landmark space, so it depends on the data (tasks.adagrad_lr).
-# results/label_sweep.json: coma 0.03 (89.6 % at FID 2.35), bu 0.03 (100 % at FID 0.13).
+# Alg. 1's Adagrad learning rate, per dataset, for a chain of LR_REFERENCE_STEPS reverse
+# steps: not in the paper; each is the pick of the label-control chapter's sweep (48
+# guided sequences per rate, 200 steps, best accuracy - 2 FID).
+# A rate is a step length in the normalised landmark space, so it depends on the data
+# (tasks.adagrad_lr). results/label_sweep.json: coma 0.03 (89.6 % at FID 2.35), bu 0.03
+# (100 % at FID 0.13).
 ADAGRAD_LR = {"coma": 0.03, "bu": 0.03}
 LR_REFERENCE_STEPS = 200
-# The Adagrad rate of Alg. 4's type-S guidance (our choice): the pick of results/geometry_lr.json (the smallest
-# rate whose accuracy interval overlaps the best rate's, with the faces moving at most 1.5 times the data's)
+# The Adagrad rate of Alg. 4's type-S guidance (our choice): the pick of
+# results/geometry_lr.json (the smallest rate whose accuracy interval overlaps the best
+# rate's, with the faces moving at most 1.5 times the data's)
 GEOMETRY_LR = 0.03
 HARMONISING_PASSES = 5  # Alg. 4 line 1: "for i = 1 to 5"
-RECONSTRUCTION_SCALE = 2.0  # our choice for reconstruction guidance: the sweep of the geometry-adaptive chapter
-TEXT_DATASET = "coma+bu"  # paper §5.2: text control works on CoMA and BU-4DFE merged (18 actions)
-# Alg. 2's lambda (paper: 0.01) and Adagrad rate (not in the paper) for a chain of TEXT_LR_REFERENCE_STEPS
-# reverse steps: the pick of the text-control chapter's sweep (72 raw-text sequences, 100 steps, best accuracy - 2 FID)
+# our choice for reconstruction guidance: the sweep of the geometry-adaptive chapter
+RECONSTRUCTION_SCALE = 2.0
+# paper §5.2: text control works on CoMA and BU-4DFE merged (18 actions)
+TEXT_DATASET = "coma+bu"
+# Alg. 2's lambda (paper: 0.01) and Adagrad rate (not in the paper) for a chain of
+# TEXT_LR_REFERENCE_STEPS reverse steps: the pick of the text-control chapter's sweep
+# (72 raw-text sequences, 100 steps, best accuracy - 2 FID)
 # results/text_sweep_cosine.json: lambda 0.001, rate 0.1 (77.8 % at FID 23.0).
 TEXT_GUIDANCE_WEIGHT = 0.001
 TEXT_LR = 0.1
 TEXT_LR_REFERENCE_STEPS = 100
-# What the text head reads in Eq. 10: x_t itself (Alg. 2 as written) or, not in the paper, the denoiser's
-# estimate x0_hat of the clean sequence (guidance.DenoisedCosineScore)
+# What the text head reads in Eq. 10: x_t itself (Alg. 2 as written) or, not in the
+# paper, the denoiser's estimate x0_hat of the clean sequence
+# (guidance.DenoisedCosineScore)
 HEAD_INPUTS = ("x_t", "x0_hat")
-# The score that Alg. 2 climbs: the cosine of Eq. 10 (as written) or, not in the paper, the head's own
-# log-probability of the text against the training descriptions of its wording (guidance.ContrastiveScore)
+# The score that Alg. 2 climbs: the cosine of Eq. 10 (as written) or, not in the paper,
+# the head's own log-probability of the text against the training descriptions of its
+# wording (guidance.ContrastiveScore)
 TEXT_SCORES = ("cosine", "contrastive")
-# The contrastive score's lambda (the paper's 0.01) and Adagrad rate at TEXT_LR_REFERENCE_STEPS steps: the pick
-# of appendix A1's stored sweep (72 sequences, two seeds, best Acc - 2 FID summed over both tasks)
+# The contrastive score's lambda (the paper's 0.01) and Adagrad rate at
+# TEXT_LR_REFERENCE_STEPS steps: the pick of appendix A1's stored sweep (72 sequences,
+# two seeds, best Acc - 2 FID summed over both tasks)
 CONTRASTIVE_GUIDANCE_WEIGHT = 0.01
 # results/text_sweep_contrastive.json: rate 0.06 (59.7 % at FID 23.1).
 CONTRASTIVE_LR = 0.06
-# How sharply a text is matched to the training descriptions by the contrastive score (our choice: an enriched
-# sentence and its other order, at a cosine of about 0.985, get weights of about 0.95 and 0.05)
+# How sharply a text is matched to the training descriptions by the contrastive score
+# (our choice: an enriched sentence and its other order, at a cosine of about 0.985, get
+# weights of about 0.95 and 0.05)
 MATCH_TEMPERATURE = 0.005
-# Best-of-K particles (not in the paper): the time label at which the K guided chains of each text are compared
-# by the text head, and the time above which they are left unguided (the head reads nothing there); our
-# choices from appendix A1's measurements (when the chains decide the order, what the head reads)
+# Best-of-K particles (not in the paper): the time label at which the K guided chains of
+# each text are compared by the text head, and the time above which they are left
+# unguided (the head reads nothing there); our choices from appendix A1's measurements
+# (when the chains decide the order, what the head reads)
 SELECT_TIME = 600
 PARTICLE_MAX_TIME = 1400
-DECODER_START = 400  # decoder_then_diffusion's re-noising step (not in the paper): our choice, appendix A1
+# decoder_then_diffusion's re-noising step (not in the paper): our choice, appendix A1
+DECODER_START = 400
 
 
 def _check_choice(name, value, allowed):
@@ -430,9 +525,16 @@ def _check_choice(name, value, allowed):
 def _check_number(name, value, low=0.0, allow_none=False):
     if value is None and allow_none:
         return
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not low <= value <= 3.4e38:
-        raise ValueError(f"{name} must be a {'non-negative number' if low == 0 else f'number >= {low}'} (and finite, "
-                         f"at most 3.4e38: the networks compute in float32), got {value!r}")
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, (int, float))
+        or not low <= value <= 3.4e38
+    ):
+        raise ValueError(
+            f"{name} must be a"
+            f" {'non-negative number' if low == 0 else f'number >= {low}'} (and finite,"
+            f" at most 3.4e38: the networks compute in float32), got {value!r}"
+        )
 
 
 SAMPLERS = ("ddpm", "ddim")
@@ -440,36 +542,61 @@ SAMPLERS = ("ddpm", "ddim")
 
 @dataclass(frozen=True)
 class Sampling:
-    """What every sampling task shares: the chain's length, the sequences' length, the seed."""
+    """What every sampling task shares: the chain's length, the sequences' length, the
+    seed."""
 
     steps: int | None = None
     num_frames: int = NUM_FRAMES  # paper §4: 40 frames
     seed: int = 0
-    variance: str | None = None  # the sampler's sigma_t^2: "beta" (paper §4), "posterior" (beta~_t); None: the model's
-    sampler: str = "ddpm"  # "ddpm": the ancestral step of Eq. 5 (paper); "ddim": DDIM's step (Song et al. 2021)
-    eta: float = 0.0  # DDIM only: sigma_t^2 = eta^2 beta~_t, in [0, 1] (0: deterministic; 1: the DDPM posterior)
+    # the sampler's sigma_t^2: "beta" (paper §4), "posterior" (beta~_t); None: the
+    # model's
+    variance: str | None = None
+    # "ddpm": the ancestral step of Eq. 5 (paper); "ddim": DDIM's step (Song et al.
+    # 2021)
+    sampler: str = "ddpm"
+    # DDIM only: sigma_t^2 = eta^2 beta~_t, in [0, 1] (0: deterministic; 1: the DDPM
+    # posterior)
+    eta: float = 0.0
 
     def __post_init__(self):
         if self.variance is not None:
             _check_choice("variance", self.variance, ("beta", "posterior"))
         _check_choice("sampler", self.sampler, SAMPLERS)
-        if isinstance(self.eta, bool) or not isinstance(self.eta, (int, float)) or not 0 <= self.eta <= 1:
-            raise ValueError(f"eta must be a number in [0, 1] (0: deterministic DDIM), got {self.eta!r}")
+        if (
+            isinstance(self.eta, bool)
+            or not isinstance(self.eta, (int, float))
+            or not 0 <= self.eta <= 1
+        ):
+            raise ValueError(
+                "eta must be a number in [0, 1] (0: deterministic DDIM), got"
+                f" {self.eta!r}"
+            )
         if self.eta and self.sampler != "ddim":
-            raise ValueError(f"eta = {self.eta} is DDIM's noise: it needs sampler 'ddim' (the sampler is {self.sampler!r})")
+            raise ValueError(
+                f"eta = {self.eta} is DDIM's noise: it needs sampler 'ddim' (the"
+                f" sampler is {self.sampler!r})"
+            )
         if self.steps is not None:
             _check_positive_int("steps", self.steps)
         _check_positive_int("num_frames", self.num_frames)
-        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or not 0 <= self.seed < 2 ** 32:
-            raise ValueError(f"seed must be an integer in 0..2**32 - 1, got {self.seed!r}")
+        if (
+            isinstance(self.seed, bool)
+            or not isinstance(self.seed, int)
+            or not 0 <= self.seed < 2**32
+        ):
+            raise ValueError(
+                f"seed must be an integer in 0..2**32 - 1, got {self.seed!r}"
+            )
 
     @property
     def ddim_eta(self):
-        """DDIM's eta when the sampler is DDIM, else None (GaussianDiffusion's ``eta``)."""
+        """DDIM's eta when the sampler is DDIM, else None (GaussianDiffusion's
+        ``eta``)."""
         return self.eta if self.sampler == "ddim" else None
 
     def paper(self):
-        return replace(self, steps=None, variance="beta", sampler="ddpm", eta=0.0)  # §4: T = 2000, sigma_t^2 = beta_t
+        # §4: T = 2000, sigma_t^2 = beta_t
+        return replace(self, steps=None, variance="beta", sampler="ddpm", eta=0.0)
 
     def fast(self):
         return replace(self, steps=20)
@@ -477,26 +604,33 @@ class Sampling:
 
 @dataclass(frozen=True)
 class Unconditional(Sampling):
-    steps: int | None = 500  # results/sampling_respacing.json: 500 steps change none of the denoiser's measures
+    # results/sampling_respacing.json: 500 steps change none of the denoiser's measures
+    steps: int | None = 500
     dataset: str = "coma"  # the denoiser denoiser_<dataset>
 
 
 @dataclass(frozen=True)
 class LabelControl(Sampling):
-    """Alg. 1: 3 Adagrad steps per reverse step on lambda log p_theta + log p_phi (or the classic mean shift);
-    or, not in the paper, classifier-free guidance of a label-conditional denoiser."""
+    """Alg. 1: 3 Adagrad steps per reverse step on lambda log p_theta + log p_phi (or
+    the classic mean shift); or, not in the paper, classifier-free guidance of a
+    label-conditional denoiser."""
 
-    steps: int | None = 200  # the Adagrad rate was chosen at 200 steps (results/label_steps_coma.json)
+    # the Adagrad rate was chosen at 200 steps (results/label_steps_coma.json)
+    steps: int | None = 200
     dataset: str = "coma"
-    guidance: str = "classifier"  # the paper's; "cfg": classifier-free (the denoiser denoiser_<dataset>_cfg)
+    # the paper's; "cfg": classifier-free (the denoiser denoiser_<dataset>_cfg)
+    guidance: str = "classifier"
     classifier_type: str = "I"  # paper §5.1: type I (label) for Alg. 1
-    # classifier guidance by "adagrad" (Alg. 1) or "mean_shift" (Dhariwal & Nichol's); None: the one measured best
-    # with the sampler (guidance_method)
+    # classifier guidance by "adagrad" (Alg. 1) or "mean_shift" (Dhariwal & Nichol's);
+    # None: the one measured best with the sampler (guidance_method)
     method: str | None = None
     guidance_weight: float = GUIDANCE_WEIGHT
-    lr: float | None = None  # None: ADAGRAD_LR of the dataset, scaled to the steps (tasks.adagrad_lr)
-    scale: float | None = None  # the mean shift's s or CFG's w; None: default_mean_shift_scale or CFG_SCALE
-    default_mean_shift_scale = MEAN_SHIFT_SCALE  # a class constant, not a field (Edit has its own)
+    # None: ADAGRAD_LR of the dataset, scaled to the steps (tasks.adagrad_lr)
+    lr: float | None = None
+    # the mean shift's s or CFG's w; None: default_mean_shift_scale or CFG_SCALE
+    scale: float | None = None
+    # a class constant, not a field (Edit has its own)
+    default_mean_shift_scale = MEAN_SHIFT_SCALE
 
     def __post_init__(self):
         super().__post_init__()
@@ -509,114 +643,177 @@ class LabelControl(Sampling):
 
     @property
     def guidance_scale(self):
-        """The scale this run uses: ``scale``, or the default of its guidance (CFG's w, the mean shift's s)."""
+        """The scale this run uses: ``scale``, or the default of its guidance (CFG's w,
+        the mean shift's s)."""
         if self.scale is not None:
             return self.scale
         return CFG_SCALE if self.guidance == "cfg" else self.default_mean_shift_scale
 
     @property
     def guidance_method(self):
-        """The classifier guidance this run uses: ``method``, or Alg. 1 under DDPM and the mean shift under DDIM,
-        whose deterministic chain keeps the jitter of Alg. 1's Adagrad steps to the end
-        (results/fast_sampling_steps.json)."""
+        """The classifier guidance this run uses: ``method``, or Alg. 1 under DDPM and
+        the mean shift under DDIM, whose deterministic chain keeps the jitter of Alg.
+        1's Adagrad steps to the end (results/fast_sampling_steps.json)."""
         if self.method is not None:
             return self.method
         return "adagrad" if self.sampler == "ddpm" else "mean_shift"
 
     def paper(self):
-        return replace(super().paper(), guidance="classifier", method="adagrad", guidance_weight=GUIDANCE_WEIGHT)
+        return replace(
+            super().paper(),
+            guidance="classifier",
+            method="adagrad",
+            guidance_weight=GUIDANCE_WEIGHT,
+        )
 
 
 @dataclass(frozen=True)
 class Edit(LabelControl):
-    """Editing a given sequence (not in the paper): DDIM inversion to x_T, then regeneration with label control;
-    what x_T encodes (timing, identity) is kept, the guidance changes the expression."""
+    """Editing a given sequence (not in the paper): DDIM inversion to x_T, then
+    regeneration with label control; what x_T encodes (timing, identity) is kept, the
+    guidance changes the expression."""
 
     steps: int | None = 100  # issue 27: inversion at eta = 0 with 100 steps
     sampler: str = "ddim"  # inversion is DDIM's
     eta: float = 0.0
-    refine: int = 2  # fixed-point iterations per inversion step (GaussianDiffusion.invert): 3 network calls per step
-    # frames returned as given, 0-based ranges: the neutral frame of an N2E sequence, which an edit would otherwise
-    # move (issue 42: 2.45 mm on a test sequence); None: every frame regenerated
+    # fixed-point iterations per inversion step (GaussianDiffusion.invert): 3 network
+    # calls per step
+    refine: int = 2
+    # frames returned as given, 0-based ranges: the neutral frame of an N2E sequence,
+    # which an edit would otherwise move (issue 42: 2.45 mm on a test sequence); None:
+    # every frame regenerated
     keep: str | None = "0:1"
     default_mean_shift_scale = EDIT_MEAN_SHIFT_SCALE
 
     def __post_init__(self):
         super().__post_init__()
-        if isinstance(self.refine, bool) or not isinstance(self.refine, int) or self.refine < 0:
-            raise ValueError(f"refine must be a number of fixed-point iterations >= 0, got {self.refine!r}")
+        if (
+            isinstance(self.refine, bool)
+            or not isinstance(self.refine, int)
+            or self.refine < 0
+        ):
+            raise ValueError(
+                "refine must be a number of fixed-point iterations >= 0, got"
+                f" {self.refine!r}"
+            )
         if self.sampler != "ddim" or self.eta != 0:
-            raise ValueError(f"editing inverts a sequence by deterministic DDIM and regenerates it on the same path: "
-                             f"the sampler must be 'ddim' with eta 0, got {self.sampler!r} with eta {self.eta!r}")
+            raise ValueError(
+                "editing inverts a sequence by deterministic DDIM and regenerates it"
+                " on the same path: the sampler must be 'ddim' with eta 0, got"
+                f" {self.sampler!r} with eta {self.eta!r}"
+            )
 
     def paper(self):
-        raise ValueError("editing is not in the paper: there is no --paper version of it")
+        raise ValueError(
+            "editing is not in the paper: there is no --paper version of it"
+        )
 
 
 @dataclass(frozen=True)
 class TextControl(Sampling):
-    """Alg. 2: Adagrad steps on lambda log p_theta + score(x, t-1), the score reading the text head."""
+    """Alg. 2: Adagrad steps on lambda log p_theta + score(x, t-1), the score reading
+    the text head."""
 
-    steps: int | None = 100  # the text guidance was chosen at 100 steps (results/text_sweep_cosine.json)
+    # the text guidance was chosen at 100 steps (results/text_sweep_cosine.json)
+    steps: int | None = 100
     dataset: str = TEXT_DATASET
-    score: str = "cosine"  # Eq. 10 (the text-control chapter compares the contrastive score)
+    # Eq. 10 (the text-control chapter compares the contrastive score)
+    score: str = "cosine"
     head_input: str = "x_t"  # Alg. 2 (x0_hat: not in the paper)
-    vocabulary: bool = False  # contrastive score only: match the text against every known description
-    guidance_weight: float | None = None  # None: TEXT_GUIDANCE_WEIGHT, CONTRASTIVE_GUIDANCE_WEIGHT for "contrastive"
-    lr: float | None = None  # None: TEXT_LR (CONTRASTIVE_LR), scaled to the steps (tasks.text_lr)
-    particles: int = 1  # best-of-K: K guided chains per sequence until SELECT_TIME (1: Alg. 2 as written)
+    # contrastive score only: match the text against every known description
+    vocabulary: bool = False
+    # None: TEXT_GUIDANCE_WEIGHT, CONTRASTIVE_GUIDANCE_WEIGHT for "contrastive"
+    guidance_weight: float | None = None
+    # None: TEXT_LR (CONTRASTIVE_LR), scaled to the steps (tasks.text_lr)
+    lr: float | None = None
+    # best-of-K: K guided chains per sequence until SELECT_TIME (1: Alg. 2 as written)
+    particles: int = 1
     select_time: float = SELECT_TIME
-    max_time: float | None = None  # leave the steps above this time label unguided (None: guide all)
+    # leave the steps above this time label unguided (None: guide all)
+    max_time: float | None = None
 
     def __post_init__(self):
         super().__post_init__()
         _check_choice("score", self.score, TEXT_SCORES)
         _check_choice("head_input", self.head_input, HEAD_INPUTS)
         if self.score == "contrastive" and self.head_input != "x_t":
-            raise ValueError("the contrastive score reads x_t: use head_input='x_t' with score='contrastive'")
+            raise ValueError(
+                "the contrastive score reads x_t: use head_input='x_t' with"
+                " score='contrastive'"
+            )
         if self.vocabulary not in (False, True):
-            raise ValueError(f"vocabulary must be True or False, got {self.vocabulary!r}")
+            raise ValueError(
+                f"vocabulary must be True or False, got {self.vocabulary!r}"
+            )
         if self.vocabulary and self.score != "contrastive":
-            raise ValueError("the vocabulary is matched by the contrastive score: use vocabulary=True with "
-                             "score='contrastive'")
+            raise ValueError(
+                "the vocabulary is matched by the contrastive score: use"
+                " vocabulary=True with score='contrastive'"
+            )
         _check_positive_int("particles", self.particles)
         _check_number("select_time", self.select_time, low=1)
         for name in ("guidance_weight", "lr", "max_time"):
             _check_number(name, getattr(self, name), allow_none=True)
 
     def paper(self):
-        return replace(super().paper(), score="cosine", head_input="x_t", vocabulary=False, particles=1, max_time=None,
-                       guidance_weight=GUIDANCE_WEIGHT)  # §4: lambda = 0.01
+        return replace(
+            super().paper(),
+            score="cosine",
+            head_input="x_t",
+            vocabulary=False,
+            particles=1,
+            max_time=None,
+            guidance_weight=GUIDANCE_WEIGHT,
+        )  # §4: lambda = 0.01
 
 
-AU_CURVE_TOLERANCE = 0.1  # tau of AU-curve control: log N(c | R(x_t, t), tau^2), in AU intensity units (our choice)
-AU_CURVE_LR = 0.03  # the Adagrad rate of AU-curve control at 50 steps (our choice; the fine-control chapter)
-AU_MEASURABLE_FIT_ERROR = 0.05  # our choice: AU-curve control is scored on the AUs that the rig fit recovers
-# within this (mean absolute error, intensity units) on real test sequences (experiments.fit_floor), no others
-AU_ACTIVE = 0.2  # our choice: a sequence activates an AU when its |intensity| exceeds this at some frame
-# (tasks.au.active_aus, tasks.never_together): a clear activation (a fifth of a typical strong apex), not a trace
-AU_REQUEST_PEAK = (0.3, 1.0)  # our choice: a random request's peak lies in [low, min(high, the data's highest)]
-# (experiments.random_requests): strong enough for the rig fit to see, never beyond a typical strong apex (1)
-AU_REQUEST_PEAK_FRAMES = (10, 25)  # our choice: the frames (inclusive) where a random request peaks, so the
+# tau of AU-curve control: log N(c | R(x_t, t), tau^2), in AU intensity units (our
+# choice)
+AU_CURVE_TOLERANCE = 0.1
+# the Adagrad rate of AU-curve control at 50 steps (our choice; the fine-control
+# chapter)
+AU_CURVE_LR = 0.03
+# our choice: AU-curve control is scored on the AUs that the rig fit recovers
+AU_MEASURABLE_FIT_ERROR = 0.05
+# within this (mean absolute error, intensity units) on real test sequences
+# (experiments.fit_floor), no others our choice: a sequence activates an AU when its
+# |intensity| exceeds this at some frame
+AU_ACTIVE = 0.2
+# (tasks.au.active_aus, tasks.never_together): a clear activation (a fifth of a typical
+# strong apex), not a trace our choice: a random request's peak lies in [low, min(high,
+# the data's highest)]
+AU_REQUEST_PEAK = (0.3, 1.0)
+# (experiments.random_requests): strong enough for the rig fit to see, never beyond a
+# typical strong apex (1) our choice: the frames (inclusive) where a random request
+# peaks, so the
+AU_REQUEST_PEAK_FRAMES = (10, 25)
 # curve rises over at least 10 frames and falls over at least 14 of the 40
 
 
 @dataclass(frozen=True)
 class AUControl(Sampling):
-    """AU-curve control (not in the paper; the fine-control chapter): Alg. 1's 3 Adagrad steps per reverse
-    step on lambda log p_theta + log N(c | R(x, t-1), tau^2), R the noisy AU regressor and c the requested
-    curves of the constrained AUs; or the classic mean shift along the same score."""
+    """AU-curve control (not in the paper; the fine-control chapter): Alg. 1's 3 Adagrad
+    steps per reverse step on lambda log p_theta + log N(c | R(x, t-1), tau^2), R the
+    noisy AU regressor and c the requested curves of the constrained AUs; or the classic
+    mean shift along the same score."""
 
     steps: int | None = 50
-    dataset: str = "coma"  # the unconditional denoiser denoiser_<dataset> and the regressor au_regressor_<dataset>
+    # the unconditional denoiser denoiser_<dataset> and the regressor
+    # au_regressor_<dataset>
+    dataset: str = "coma"
     method: str = "adagrad"  # "adagrad" (Alg. 1's optimisation) or "mean_shift"
     guidance_weight: float = GUIDANCE_WEIGHT  # lambda (Alg. 1's)
-    lr: float | None = None  # None: AU_CURVE_LR at 50 steps, scaled to the steps as label control's rate
+    # None: AU_CURVE_LR at 50 steps, scaled to the steps as label control's rate
+    lr: float | None = None
     scale: float = MEAN_SHIFT_SCALE  # the mean shift's s
     tolerance: float = AU_CURVE_TOLERANCE
-    read: str = "x0_hat"  # what R reads: "x0_hat", the denoiser's estimate (the fine-control chapter), or "x_t"
-    reconstruction_scale: float = RECONSTRUCTION_SCALE  # with a given face: joins the frames to it (as Alg. 4's)
-    au_weight: float = 1.0  # the weight of log N(c | R, tau^2); 0: "AU guidance off" (tasks.au.AU_GUIDANCE_OFF)
+    # what R reads: "x0_hat", the denoiser's estimate (the fine-control chapter), or
+    # "x_t"
+    read: str = "x0_hat"
+    # with a given face: joins the frames to it (as Alg. 4's)
+    reconstruction_scale: float = RECONSTRUCTION_SCALE
+    # the weight of log N(c | R, tau^2); 0: "AU guidance off" (tasks.au.AU_GUIDANCE_OFF)
+    au_weight: float = 1.0
 
     def __post_init__(self):
         super().__post_init__()
@@ -632,30 +829,43 @@ class AUControl(Sampling):
 
 @dataclass(frozen=True)
 class DecoderThenDiffusion(Sampling):
-    """Not in the paper: the MotionCLIP-style decoder's sequence, re-noised to ``start`` and denoised (SDEdit)."""
+    """Not in the paper: the MotionCLIP-style decoder's sequence, re-noised to ``start``
+    and denoised (SDEdit)."""
 
-    steps: int | None = 100  # the text-control chapter measures it on the chain of text control
+    # the text-control chapter measures it on the chain of text control
+    steps: int | None = 100
     dataset: str = TEXT_DATASET
     start: int = DECODER_START  # a step of the paper's chain, 1..T
 
     def __post_init__(self):
         super().__post_init__()
-        if isinstance(self.start, bool) or not isinstance(self.start, int) or self.start < 1:
-            raise ValueError(f"start must be a step of the paper's chain (an integer >= 1), got {self.start!r}")
+        if (
+            isinstance(self.start, bool)
+            or not isinstance(self.start, int)
+            or self.start < 1
+        ):
+            raise ValueError(
+                "start must be a step of the paper's chain (an integer >= 1), got"
+                f" {self.start!r}"
+            )
 
 
 @dataclass(frozen=True)
 class Fill(Sampling):
     """Alg. 3 (expression filling), with the book's additions."""
 
-    # results/fill_defaults.json (benchmarks/fill_defaults.py): of the candidates, reconstruction guidance with the
-    # posterior variance beta~_t at 100 steps joins the most seams smoothly, at the best accuracy and FID, in half
-    # the time of 200 steps; with sigma_t^2 = beta_t the generated frames jitter more than the data.
+    # results/fill_defaults.json (benchmarks/fill_defaults.py): of the candidates,
+    # reconstruction guidance with the posterior variance beta~_t at 100 steps joins the
+    # most seams smoothly, at the best accuracy and FID, in half the time of 200 steps;
+    # with sigma_t^2 = beta_t the generated frames jitter more than the data.
     steps: int | None = 100
     variance: str | None = "posterior"  # our choice (the paper samples with beta_t)
     dataset: str = "coma"
-    reconstruction_scale: float = RECONSTRUCTION_SCALE  # joins the generated frames to the known (filling chapter)
-    resample: int = 1  # RePaint's r: r = 2 joins more seams (89 %) but reads the label less (82.8 %), in twice the time
+    # joins the generated frames to the known (filling chapter)
+    reconstruction_scale: float = RECONSTRUCTION_SCALE
+    # RePaint's r: r = 2 joins more seams (89 %) but reads the label less (82.8 %), in
+    # twice the time
+    resample: int = 1
 
     def __post_init__(self):
         super().__post_init__()
@@ -663,21 +873,24 @@ class Fill(Sampling):
         _check_positive_int("resample", self.resample)
 
     def paper(self):
-        return replace(super().paper(), reconstruction_scale=0.0, resample=1)  # Alg. 3 as printed
+        # Alg. 3 as printed
+        return replace(super().paper(), reconstruction_scale=0.0, resample=1)
 
 
 KEYFRAME_METHODS = ("replace", "reconstruction", "both")
-KEYFRAME_TOLERANCE = 0.5  # mm, our choice: a key counts as met within this distance (and no jump); 2.5 x the
-# 0.2 mm std of the world's capture noise per coordinate (face.sequences.Timing.noise_mm), so a key is
-# met when the landmark is where a real capture of that pose could put it
+# mm, our choice: a key counts as met within this distance (and no jump); 2.5 x the
+KEYFRAME_TOLERANCE = 0.5
+# 0.2 mm std of the world's capture noise per coordinate
+# (face.sequences.Timing.noise_mm), so a key is met when the landmark is where a real
+# capture of that pose could put it
 
 
 @dataclass(frozen=True)
 class Keyframes(Sampling):
-    """Landmark keyframes (not in the paper; the fine-control chapter): chosen landmarks at chosen frames.
-    "replace": Alg. 3 on coordinates (the constrained landmarks re-drawn from q(x_{t-1} | x_0));
-    "reconstruction": reconstruction guidance on them; "both": the two together, as OmniControl's spatial
-    guidance with inpainting."""
+    """Landmark keyframes (not in the paper; the fine-control chapter): chosen landmarks
+    at chosen frames. "replace": Alg. 3 on coordinates (the constrained landmarks
+    re-drawn from q(x_{t-1} | x_0)); "reconstruction": reconstruction guidance on them;
+    "both": the two together, as OmniControl's spatial guidance with inpainting."""
 
     steps: int | None = 100  # the filling chapter's chain (Fill)
     variance: str | None = "posterior"
@@ -693,15 +906,22 @@ class Keyframes(Sampling):
 
 @dataclass(frozen=True)
 class GeometryAdaptive(Sampling):
-    """Alg. 4 (geometry-adaptive generation with the type-S classifier), with the book's additions."""
+    """Alg. 4 (geometry-adaptive generation with the type-S classifier), with the book's
+    additions."""
 
-    steps: int | None = 100  # the geometry-adaptive and end-to-end chapters: the respaced chain of `animate`
+    # the geometry-adaptive and end-to-end chapters: the respaced chain of `animate`
+    steps: int | None = 100
     dataset: str = "coma"
-    order: str | None = None  # the neutral face first ("N2E", the default) or last ("E2N"), unless the label says
-    passes: int = 1  # the geometry-adaptive chapter: the harmonising passes of Alg. 4 add nothing measurable
-    renoise_step: int | None = None  # pass i > 1 re-noises to this step (None: to T, as the paper)
+    # the neutral face first ("N2E", the default) or last ("E2N"), unless the label says
+    order: str | None = None
+    # the geometry-adaptive chapter: the harmonising passes of Alg. 4 add nothing
+    # measurable
+    passes: int = 1
+    # pass i > 1 re-noises to this step (None: to T, as the paper)
+    renoise_step: int | None = None
     resample: int = 1  # RePaint's r within each pass (1: Alg. 4 as written)
-    reconstruction_scale: float = RECONSTRUCTION_SCALE  # the sweep of zeta (geometry-adaptive chapter)
+    # the sweep of zeta (geometry-adaptive chapter)
+    reconstruction_scale: float = RECONSTRUCTION_SCALE
     guidance_weight: float = GUIDANCE_WEIGHT
     lr: float = GEOMETRY_LR
 
@@ -714,35 +934,60 @@ class GeometryAdaptive(Sampling):
         _check_number("lr", self.lr)
 
     def paper(self):
-        return replace(super().paper(), passes=HARMONISING_PASSES, reconstruction_scale=0.0, resample=1)
+        return replace(
+            super().paper(),
+            passes=HARMONISING_PASSES,
+            reconstruction_scale=0.0,
+            resample=1,
+        )
 
     def fast(self):
         return replace(self, steps=10)
 
 
-UNITS_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0}  # millimetres per unit of a reader's mesh (the chapter "Your own face")
+# millimetres per unit of a reader's mesh (the chapter "Your own face")
+UNITS_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0}
 
 
 @dataclass(frozen=True)
 class Registration:
-    """Fitting the template to a reader's own face mesh (facelib/registration.py, the chapter "Your own face")."""
+    """Fitting the template to a reader's own face mesh (facelib/registration.py, the
+    chapter "Your own face")."""
 
-    units: str | None = None  # "mm", "cm" or "m"; None: detected from the mesh's size (FACE_EXTENT_MM)
-    samples: int = 40_000  # our choice: points sampled on the mesh's surface, area-weighted (the fit's target)
-    rigid_iterations: int = 30  # similarity ICP (Umeyama): a third from each of 24 starts, the rest from the best
-    trim: float = 0.9  # our choice: each ICP step keeps this share of the closest correspondences (holes, extras)
-    model_rounds: int = 30  # our choice: correspondence rounds of the identity-model fit (point to plane)
-    model_steps: int = 3  # our choice: Gauss-Newton evaluations per round (new correspondences converge faster)
-    model_prior: float = 1.0  # weight of the N(0, I) prior on the identity coefficients (a 3DMM's prior)
-    # Non-rigid ICP (Amberg et al. 2007, trimesh.registration.nricp_amberg): (stiffness, landmark weight, normal
-    # weight, iterations) per stage, the stiffness annealed from stiff to supple.  Our choice (the chapter "Your own
-    # face", section 4): stiffer than trimesh's default, since the identity model already brought the template close.
-    stiffness: tuple = ((1.0, 0.0, 1.0, 10), (0.3, 0.0, 1.0, 10), (0.1, 0.0, 1.0, 10), (0.03, 0.0, 0.5, 10))
+    # "mm", "cm" or "m"; None: detected from the mesh's size (FACE_EXTENT_MM)
+    units: str | None = None
+    # our choice: points sampled on the mesh's surface, area-weighted (the fit's target)
+    samples: int = 40_000
+    # similarity ICP (Umeyama): a third from each of 24 starts, the rest from the best
+    rigid_iterations: int = 30
+    # our choice: each ICP step keeps this share of the closest correspondences (holes,
+    # extras)
+    trim: float = 0.9
+    # our choice: correspondence rounds of the identity-model fit (point to plane)
+    model_rounds: int = 30
+    # our choice: Gauss-Newton evaluations per round (new correspondences converge
+    # faster)
+    model_steps: int = 3
+    # weight of the N(0, I) prior on the identity coefficients (a 3DMM's prior)
+    model_prior: float = 1.0
+    # Non-rigid ICP (Amberg et al. 2007, trimesh.registration.nricp_amberg): (stiffness,
+    # landmark weight, normal weight, iterations) per stage, the stiffness annealed from
+    # stiff to supple.  Our choice (the chapter "Your own face", section 4): stiffer
+    # than trimesh's default, since the identity model already brought the template
+    # close.
+    stiffness: tuple = (
+        (1.0, 0.0, 1.0, 10),
+        (0.3, 0.0, 1.0, 10),
+        (0.1, 0.0, 1.0, 10),
+        (0.03, 0.0, 0.5, 10),
+    )
     match_distance_mm: float = 10.0  # NRICP ignores correspondences farther than this
-    # Our choice (measured in the chapter "Your own face"): after rigid alignment every face of the truth set is
-    # within 2.5 mm (trimmed RMS), a sphere, a cube, a hand and a plane at 4.5 mm or more.  A worse fit is refused.
+    # Our choice (measured in the chapter "Your own face"): after rigid alignment every
+    # face of the truth set is within 2.5 mm (trimmed RMS), a sphere, a cube, a hand and
+    # a plane at 4.5 mm or more.  A worse fit is refused.
     max_residual_mm: float = 3.5
-    falloff_mm: tuple = (5.0, 40.0)  # motion carried in full within 5 mm of the fitted face, fading out by 40 mm
+    # motion carried in full within 5 mm of the fitted face, fading out by 40 mm
+    falloff_mm: tuple = (5.0, 40.0)
 
     def __post_init__(self):
         if self.units is not None:
@@ -754,21 +999,35 @@ class Registration:
             raise ValueError(f"trim must be in [0.5, 1], got {self.trim}")
         near, far = self.falloff_mm
         if not 0 <= near < far:
-            raise ValueError(f"falloff_mm must be (near, far) with 0 <= near < far, got {self.falloff_mm}")
+            raise ValueError(
+                "falloff_mm must be (near, far) with 0 <= near < far, got"
+                f" {self.falloff_mm}"
+            )
 
     def fast(self):
         return replace(self, samples=20_000, rigid_iterations=15)
 
 
-SAMPLING = {"unconditional": Unconditional(), "label": LabelControl(), "text": TextControl(), "fill": Fill(),
-            "geometry": GeometryAdaptive(), "edit": Edit(), "au": AUControl(), "keyframes": Keyframes()}
+SAMPLING = {
+    "unconditional": Unconditional(),
+    "label": LabelControl(),
+    "text": TextControl(),
+    "fill": Fill(),
+    "geometry": GeometryAdaptive(),
+    "edit": Edit(),
+    "au": AUControl(),
+    "keyframes": Keyframes(),
+}
 
 
 def with_overrides(settings, overrides):
-    """``settings`` with the fields named in ``overrides`` changed (a clear error for a name it has not)."""
+    """``settings`` with the fields named in ``overrides`` changed (a clear error for a
+    name it has not)."""
     allowed = [f.name for f in fields(settings)]
     unknown = sorted(set(overrides) - set(allowed))
     if unknown:
-        raise ValueError(f"{type(settings).__name__} has no setting {', '.join(unknown)}; its settings: "
-                         f"{', '.join(allowed)}")
+        raise ValueError(
+            f"{type(settings).__name__} has no setting {', '.join(unknown)}; its"
+            f" settings: {', '.join(allowed)}"
+        )
     return replace(settings, **overrides)

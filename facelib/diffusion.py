@@ -1,31 +1,40 @@
-"""Gaussian diffusion (DDPM, paper §3.1): schedules, the forward process, the reverse process.
+"""Gaussian diffusion (DDPM, paper §3.1): schedules, the forward process, the reverse
+process.
 
-Time convention (said once, here): **t is 1-based, as in the paper**.  t = 1..T are the noisy
-steps and t = 0 is the data; every coefficient array has length T + 1 and is indexed by the
-paper's t, e.g. ``alphas_bar[t]`` is alpha_bar_t with ``alphas_bar[0] = 1`` and ``betas[0] = 0``.
+Time convention (said once, here): **t is 1-based, as in the paper**.  t = 1..T are the
+noisy steps and t = 0 is the data; every coefficient array has length T + 1 and is
+indexed by the paper's t, e.g. ``alphas_bar[t]`` is alpha_bar_t with ``alphas_bar[0] =
+1`` and ``betas[0] = 0``.
 
-Schedules are free functions; :class:`GaussianDiffusion` precomputes every coefficient in
-float64 (numpy) and owns every closed form:
+Schedules are free functions; :class:`GaussianDiffusion` precomputes every coefficient
+in float64 (numpy) and owns every closed form:
 
-* ``q_sample``           x_t ~ q(x_t | x_0) = N(sqrt(abar_t) x_0, (1 - abar_t) I)                (Eq. 3, 6)
-* ``q_posterior``        q(x_{t-1} | x_t, x_0) = N(mu~_t, beta~_t I)
-* ``p_mean_variance``    mu_theta(x_t, t) = (x_t - beta_t / sqrt(1 - abar_t) eps_theta) / sqrt(alpha_t)  (Eq. 7,
-                         in its correct form: the paper prints sqrt(1 - alpha_t))
-* ``p_sample``           x_{t-1} ~ p_theta(x_{t-1} | x_t) = N(mu_theta, sigma_t^2 I), sigma_t^2 = beta_t  (Eq. 5, §4)
-* ``sample``, ``run``    the reverse chain from x_T ~ N(0, I), or any part of it from a given x (``schedule``)
-* ``training_loss``      E ||eps - eps_theta(x_t, t)||^2                                           (Eq. 8)
-                         weighted per step (``loss_weights``): the loss of an x0 or v prediction target, min-SNR-gamma
-* ``respace``            the same model on a subset of the steps (fewer steps, no retraining)
-* ``eta``                DDIM (Song et al. 2021, Eq. 12) instead of the ancestral step: the same trained model,
-                         x_{t-1} = sqrt(abar_{t-1}) x0_hat + sqrt(1 - abar_{t-1} - sigma_t^2) eps_theta + sigma_t z
-                         with sigma_t^2 = eta^2 beta~_t: deterministic at eta = 0, the DDPM posterior at eta = 1
-* ``invert``             DDIM inversion (eta = 0 run backwards): x_0 -> x_T, from which ``run`` regenerates x_0
+* ``q_sample``: x_t ~ q(x_t | x_0) = N(sqrt(abar_t) x_0, (1 - abar_t) I)  (Eq. 3, 6)
+* ``q_posterior``: q(x_{t-1} | x_t, x_0) = N(mu~_t, beta~_t I)
+* ``p_mean_variance``: mu_theta(x_t, t) = (x_t - beta_t / sqrt(1 - abar_t) eps_theta)
+  / sqrt(alpha_t)  (Eq. 7, in its correct form: the paper prints sqrt(1 - alpha_t))
+* ``p_sample``: x_{t-1} ~ p_theta(x_{t-1} | x_t) = N(mu_theta, sigma_t^2 I),
+  sigma_t^2 = beta_t  (Eq. 5, §4)
+* ``sample``, ``run``: the reverse chain from x_T ~ N(0, I), or any part of it from a
+  given x (``schedule``)
+* ``training_loss``: E ||eps - eps_theta(x_t, t)||^2  (Eq. 8), weighted per step
+  (``loss_weights``): the loss of an x0 or v prediction target, min-SNR-gamma
+* ``respace``: the same model on a subset of the steps (fewer steps, no retraining)
+* ``eta``: DDIM (Song et al. 2021, Eq. 12) instead of the ancestral step: the same
+  trained model, x_{t-1} = sqrt(abar_{t-1}) x0_hat + sqrt(1 - abar_{t-1} - sigma_t^2)
+  eps_theta + sigma_t z with sigma_t^2 = eta^2 beta~_t: deterministic at eta = 0, the
+  DDPM posterior at eta = 1
+* ``invert``: DDIM inversion (eta = 0 run backwards): x_0 -> x_T, from which ``run``
+  regenerates x_0
 
-Respacing (Nichol & Dhariwal 2021; guided-diffusion's ``respace.py``): a respaced chain keeps the steps
-``timesteps`` of the original schedule and numbers them 1..K.  Everything outside this module speaks in the
-chain's own steps t; :meth:`GaussianDiffusion.wrap` gives a network (denoiser, classifier, text head) that
-is called with the chain's step and receives its own time label, ``timesteps[t]``, inside the call.
+Respacing (Nichol & Dhariwal 2021; guided-diffusion's ``respace.py``): a respaced chain
+keeps the steps ``timesteps`` of the original schedule and numbers them 1..K.
+Everything outside this module speaks in the chain's own steps t;
+:meth:`GaussianDiffusion.wrap` gives a network (denoiser, classifier, text head) that is
+called with the chain's step and receives its own time label, ``timesteps[t]``, inside
+the call.
 """
+
 from __future__ import annotations
 
 import itertools
@@ -40,13 +49,15 @@ VARIANCES = ("beta", "posterior")
 
 
 def linear_betas(num_steps=2000, beta_start=1e-4, beta_end=0.02):
-    """beta_1..beta_T growing linearly (paper §4: 1e-4 to 0.02, T = 2000), shape (T,)."""
+    """beta_1..beta_T growing linearly (paper §4: 1e-4 to 0.02, T = 2000), shape
+    (T,)."""
     _check_steps(num_steps)
     return np.linspace(beta_start, beta_end, num_steps, dtype=np.float64)
 
 
 def cosine_betas(num_steps=2000, s=0.008, max_beta=0.999):
-    """The cosine schedule of Nichol & Dhariwal (2021): abar_t = cos^2((t/T + s)/(1 + s) pi/2)/f(0)."""
+    """The cosine schedule of Nichol & Dhariwal (2021): abar_t = cos^2((t/T + s)/(1 + s)
+    pi/2)/f(0)."""
     _check_steps(num_steps)
     t = np.arange(num_steps + 1, dtype=np.float64) / num_steps
     f = np.cos((t + s) / (1 + s) * np.pi / 2) ** 2
@@ -58,26 +69,42 @@ def named_betas(name, num_steps):
     """Schedule by name: "linear" (the paper's) or "cosine"."""
     schedules = {"linear": linear_betas, "cosine": cosine_betas}
     if name not in schedules:
-        raise ValueError(f"unknown noise schedule {name!r}; allowed: {', '.join(schedules)}")
+        raise ValueError(
+            f"unknown noise schedule {name!r}; allowed: {', '.join(schedules)}"
+        )
     return schedules[name](num_steps)
 
 
 def _check_steps(num_steps):
-    if isinstance(num_steps, bool) or not isinstance(num_steps, (int, np.integer)) or num_steps < 1:
-        raise ValueError(f"the number of diffusion steps must be a positive integer, got {num_steps!r}")
+    if (
+        isinstance(num_steps, bool)
+        or not isinstance(num_steps, (int, np.integer))
+        or num_steps < 1
+    ):
+        raise ValueError(
+            "the number of diffusion steps must be a positive integer, got"
+            f" {num_steps!r}"
+        )
 
 
 def _extract(array, t, x):
-    """array[t] as a float tensor on x's device, shaped to broadcast against x (batch first)."""
+    """array[t] as a float tensor on x's device, shaped to broadcast against x (batch
+    first)."""
     t = torch.as_tensor(t, device="cpu").long()
     if t.numel() and (t.min() < 0 or t.max() >= len(array)):
-        raise ValueError(f"timestep out of range: t must be in 0..{len(array) - 1}, got {t.min().item()}..{t.max().item()}")
-    values = torch.as_tensor(array, dtype=torch.float64)[t].to(device=x.device, dtype=x.dtype)
+        raise ValueError(
+            f"timestep out of range: t must be in 0..{len(array) - 1}, got"
+            f" {t.min().item()}..{t.max().item()}"
+        )
+    values = torch.as_tensor(array, dtype=torch.float64)[t].to(
+        device=x.device, dtype=x.dtype
+    )
     return values.reshape(values.shape + (1,) * (x.ndim - values.ndim))
 
 
 def _device_of(network):
-    """The device of a module's first parameter or buffer (None for a plain function or an empty module)."""
+    """The device of a module's first parameter or buffer (None for a plain function or
+    an empty module)."""
     if isinstance(network, torch.nn.Module):
         for tensor in itertools.chain(network.parameters(), network.buffers()):
             return tensor.device
@@ -85,17 +112,24 @@ def _device_of(network):
 
 
 class TimeMapped(torch.nn.Module):
-    """A network seen through a (respaced) chain: called as ``net(x, t, ...)``, ``net.log_prob(x, t, ...)``,
-    ``net.embed(x, t, ...)`` or ``net.cosine(x, t, ...)`` with the chain's step t (an int or a (B,) tensor),
-    it feeds the network its own time label ``timesteps[t]`` (guided-diffusion's ``_WrappedModel``).
+    """A network seen through a (respaced) chain: called as ``net(x, t, ...)``,
+    ``net.log_prob(x, t, ...)``, ``net.embed(x, t, ...)`` or ``net.cosine(x, t, ...)``
+    with the chain's step t (an int or a (B,) tensor), it feeds the network its own time
+    label ``timesteps[t]`` (guided-diffusion's ``_WrappedModel``).
 
-    ``network`` may be a module or a plain function ``f(x, time, ...)``: a reader's own classifier or score
-    receives the noise level's time label like the book's networks (guided-diffusion's spaced ``cond_fn``)."""
+    ``network`` may be a module or a plain function ``f(x, time, ...)``: a reader's own
+    classifier or score receives the noise level's time label like the book's networks
+    (guided-diffusion's spaced ``cond_fn``).
+    """
 
     def __init__(self, network, timesteps):
         super().__init__()
         self.network = network
-        self.register_buffer("timesteps", torch.as_tensor(timesteps, dtype=torch.float32), persistent=False)
+        self.register_buffer(
+            "timesteps",
+            torch.as_tensor(timesteps, dtype=torch.float32),
+            persistent=False,
+        )
 
     def time(self, t, x):
         """The network's time labels (B,) for the chain's step t and a batch x."""
@@ -120,54 +154,88 @@ class GaussianDiffusion:
     """Every closed form of a DDPM with the given betas (beta_1..beta_T), t 1-based.
 
     variance: "beta" uses sigma_t^2 = beta_t (paper §4); "posterior" uses beta~_t.
-    timesteps: the model's time label of each step (default 1..T; respacing keeps the original ones).
-    eta: None for the ancestral DDPM step (Eq. 5); a number in [0, 1] for DDIM's step with
-    sigma_t^2 = eta^2 beta~_t (``variance`` then does not apply).
+    timesteps: the model's time label of each step (default 1..T; respacing keeps the
+    original ones). eta: None for the ancestral DDPM step (Eq. 5); a number in [0, 1]
+    for DDIM's step with sigma_t^2 = eta^2 beta~_t (``variance`` then does not apply).
     """
 
     def __init__(self, betas, variance="beta", timesteps=None, eta=None):
         betas = np.asarray(betas, dtype=np.float64)
         if betas.ndim != 1 or len(betas) == 0 or not np.all((betas > 0) & (betas < 1)):
-            raise ValueError("betas must be a non-empty 1-D array with values in (0, 1)")
+            raise ValueError(
+                "betas must be a non-empty 1-D array with values in (0, 1)"
+            )
         if variance not in VARIANCES:
             raise ValueError(f"variance must be one of {VARIANCES}, got {variance!r}")
-        if eta is not None and (isinstance(eta, bool) or not isinstance(eta, (int, float)) or not 0 <= eta <= 1):
-            raise ValueError(f"eta must be None (DDPM) or a number in [0, 1] (DDIM; 0: deterministic), got {eta!r}")
+        if eta is not None and (
+            isinstance(eta, bool)
+            or not isinstance(eta, (int, float))
+            or not 0 <= eta <= 1
+        ):
+            raise ValueError(
+                "eta must be None (DDPM) or a number in [0, 1] (DDIM; 0:"
+                f" deterministic), got {eta!r}"
+            )
         self.num_steps = len(betas)
         self.variance = variance
         self.eta = None if eta is None else float(eta)
         self.betas = np.concatenate([[0.0], betas])
         self.alphas = 1.0 - self.betas
         self.alphas_bar = np.cumprod(self.alphas)
-        self.alphas_bar_prev = np.concatenate([[1.0], self.alphas_bar[:-1]])  # abar_{t-1}
+        # abar_{t-1}
+        self.alphas_bar_prev = np.concatenate([[1.0], self.alphas_bar[:-1]])
         self.sqrt_alphas_bar = np.sqrt(self.alphas_bar)
         self.sqrt_one_minus_alphas_bar = np.sqrt(1.0 - self.alphas_bar)
         with np.errstate(divide="ignore", invalid="ignore"):
-            # q(x_{t-1} | x_t, x_0) = N(coef_x0 x_0 + coef_xt x_t, beta~_t I), defined for t >= 1.
-            self.posterior_variance = np.nan_to_num(self.betas * (1.0 - self.alphas_bar_prev) / (1.0 - self.alphas_bar))
-            self.posterior_coef_x0 = np.nan_to_num(np.sqrt(self.alphas_bar_prev) * self.betas / (1.0 - self.alphas_bar))
-            self.posterior_coef_xt = np.nan_to_num(np.sqrt(self.alphas) * (1.0 - self.alphas_bar_prev) / (1.0 - self.alphas_bar))
-            # Eq. 7: mu = (x_t - eps_coef * eps) / sqrt(alpha_t), eps_coef = beta_t / sqrt(1 - abar_t).
+            # q(x_{t-1} | x_t, x_0) = N(coef_x0 x_0 + coef_xt x_t, beta~_t I), defined
+            # for t >= 1.
+            self.posterior_variance = np.nan_to_num(
+                self.betas * (1.0 - self.alphas_bar_prev) / (1.0 - self.alphas_bar)
+            )
+            self.posterior_coef_x0 = np.nan_to_num(
+                np.sqrt(self.alphas_bar_prev) * self.betas / (1.0 - self.alphas_bar)
+            )
+            self.posterior_coef_xt = np.nan_to_num(
+                np.sqrt(self.alphas)
+                * (1.0 - self.alphas_bar_prev)
+                / (1.0 - self.alphas_bar)
+            )
+            # Eq. 7: mu = (x_t - eps_coef * eps) / sqrt(alpha_t), eps_coef = beta_t /
+            # sqrt(1 - abar_t).
             self.eps_coef = np.nan_to_num(self.betas / self.sqrt_one_minus_alphas_bar)
-        if self.eta is not None:  # DDIM: sigma_t^2 = eta^2 (1 - abar_{t-1}) / (1 - abar_t) (1 - abar_t / abar_{t-1})
+        # DDIM: sigma_t^2 = eta^2 (1 - abar_{t-1}) / (1 - abar_t) (1 - abar_t /
+        # abar_{t-1})
+        if self.eta is not None:
             self.sigmas = self.eta * np.sqrt(self.posterior_variance)
         else:
-            self.sigmas = np.sqrt(self.betas if variance == "beta" else self.posterior_variance)
-        self.timesteps = np.arange(self.num_steps + 1) if timesteps is None else np.asarray(timesteps)
-        self.time_labels = torch.as_tensor(self.timesteps, dtype=torch.float32)  # the networks' time of each step
+            self.sigmas = np.sqrt(
+                self.betas if variance == "beta" else self.posterior_variance
+            )
+        self.timesteps = (
+            np.arange(self.num_steps + 1)
+            if timesteps is None
+            else np.asarray(timesteps)
+        )
+        # the networks' time of each step
+        self.time_labels = torch.as_tensor(self.timesteps, dtype=torch.float32)
 
     def __repr__(self):
-        sampler = f"variance={self.variance!r}" if self.eta is None else f"DDIM eta={self.eta:g}"
+        sampler = (
+            f"variance={self.variance!r}"
+            if self.eta is None
+            else f"DDIM eta={self.eta:g}"
+        )
         return f"GaussianDiffusion(T={self.num_steps}, {sampler})"
 
-    # ----------------------------------------------------------------------------- forward process
+    # -----------------------------------------------------------------------------
+    # forward process
     def q_sample(self, x0, t, eps=None, generator=None):
         """Sample x_t ~ q(x_t | x_0) = N(sqrt(abar_t) x_0, (1 - abar_t) I)
         (Eq. 3; Eq. 6 with eps)."""
         if eps is None:
-            eps = torch.randn(
-                x0.shape, generator=generator, dtype=x0.dtype
-            ).to(x0.device)
+            eps = torch.randn(x0.shape, generator=generator, dtype=x0.dtype).to(
+                x0.device
+            )
         return (
             _extract(self.sqrt_alphas_bar, t, x0) * x0
             + _extract(self.sqrt_one_minus_alphas_bar, t, x0) * eps
@@ -176,57 +244,73 @@ class GaussianDiffusion:
     def q_step(self, x_prev, t, generator=None):
         """Sample x_t ~ q(x_t | x_{t-1}) = N(sqrt(1 - beta_t) x_{t-1}, beta_t I)
         (Eq. 2)."""
-        eps = torch.randn(
-            x_prev.shape, generator=generator, dtype=x_prev.dtype
-        ).to(x_prev.device)
+        eps = torch.randn(x_prev.shape, generator=generator, dtype=x_prev.dtype).to(
+            x_prev.device
+        )
         return (
             _extract(np.sqrt(self.alphas), t, x_prev) * x_prev
             + _extract(np.sqrt(self.betas), t, x_prev) * eps
         )
 
     def q_posterior(self, x0, xt, t):
-        """Mean and variance of q(x_{t-1} | x_t, x_0) = N(mu~_t(x_t, x_0), beta~_t I)."""
-        mean = _extract(self.posterior_coef_x0, t, xt) * x0 + _extract(self.posterior_coef_xt, t, xt) * xt
+        """Mean and variance of q(x_{t-1} | x_t, x_0) = N(mu~_t(x_t, x_0), beta~_t
+        I)."""
+        mean = (
+            _extract(self.posterior_coef_x0, t, xt) * x0
+            + _extract(self.posterior_coef_xt, t, xt) * xt
+        )
         return mean, _extract(self.posterior_variance, t, xt)
 
     def predict_x0(self, xt, t, eps):
         """x_0 implied by x_t and a noise estimate: invert Eq. 6."""
-        return (xt - _extract(self.sqrt_one_minus_alphas_bar, t, xt) * eps) / _extract(self.sqrt_alphas_bar, t, xt)
+        return (xt - _extract(self.sqrt_one_minus_alphas_bar, t, xt) * eps) / _extract(
+            self.sqrt_alphas_bar, t, xt
+        )
 
-    # ----------------------------------------------------------------------------- reverse process
+    # -----------------------------------------------------------------------------
+    # reverse process
     def model_time(self, t, batch):
-        """The time label fed to the network for step t of this (maybe respaced) schedule, shape (batch,)."""
+        """The time label fed to the network for step t of this (maybe respaced)
+        schedule, shape (batch,)."""
         return torch.full((batch,), float(self.timesteps[t]))
 
     def wrap(self, network):
-        """``network`` called with this chain's steps (see :class:`TimeMapped`); a network already wrapped
-        for this chain is returned as it is."""
-        if isinstance(network, TimeMapped) and torch.equal(network.timesteps.cpu(), self.time_labels):
+        """``network`` called with this chain's steps (see :class:`TimeMapped`); a
+        network already wrapped for this chain is returned as it is."""
+        if isinstance(network, TimeMapped) and torch.equal(
+            network.timesteps.cpu(), self.time_labels
+        ):
             return network
         mapped = TimeMapped(network, self.time_labels)
         device = _device_of(network)
         return mapped if device is None else mapped.to(device)
 
     def p_mean_variance(self, model, xt, t, mask=None):
-        """Mean and variance of p_theta(x_{t-1} | x_t) from eps_theta, and x0_hat: Eq. 7 (correct form), or
-        with ``eta`` DDIM's sqrt(abar_{t-1}) x0_hat + sqrt(1 - abar_{t-1} - sigma_t^2) eps_theta.
+        """Mean and variance of p_theta(x_{t-1} | x_t) from eps_theta, and x0_hat: Eq. 7
+        (correct form), or with ``eta`` DDIM's sqrt(abar_{t-1}) x0_hat + sqrt(1 -
+        abar_{t-1} - sigma_t^2) eps_theta.
 
-        "guidance_variance" is the variance the guidance of Alg. 1-4 weighs its pull with: the step's own under
-        DDPM; under DDIM, whose own is eta^2 beta~_t (0 at eta = 0), the paper's sigma_t^2 = beta_t, so that
-        guidance pulls about as hard whatever the sampler's noise (our choice).  "time" is the network's time
-        label of step t (what hooks and callbacks, which are given the chain's step, read the noise level by)."""
+        "guidance_variance" is the variance the guidance of Alg. 1-4 weighs its pull
+        with: the step's own under DDPM; under DDIM, whose own is eta^2 beta~_t (0 at
+        eta = 0), the paper's sigma_t^2 = beta_t, so that guidance pulls about as hard
+        whatever the sampler's noise (our choice).  "time" is the network's time label
+        of step t (what hooks and callbacks, which are given the chain's step, read the
+        noise level by).
+        """
         eps = self.wrap(model)(xt, t, mask)
-        return {**self.mean_variance_from_eps(xt, t, eps), "time": float(self.timesteps[t])}
+        return {
+            **self.mean_variance_from_eps(xt, t, eps),
+            "time": float(self.timesteps[t]),
+        }
 
     def mean_variance_from_eps(self, xt, t, eps):
         """:meth:`p_mean_variance` for a given noise estimate eps
         (the mean is linear in eps)."""
         x0 = self.predict_x0(xt, t, eps)
-        variance = _extract(self.sigmas ** 2, t, xt)
+        variance = _extract(self.sigmas**2, t, xt)
         if self.eta is None:
-            mean = (
-                (xt - _extract(self.eps_coef, t, xt) * eps)
-                / _extract(np.sqrt(self.alphas), t, xt)
+            mean = (xt - _extract(self.eps_coef, t, xt) * eps) / _extract(
+                np.sqrt(self.alphas), t, xt
             )
             guidance_variance = variance
         else:
@@ -245,14 +329,20 @@ class GaussianDiffusion:
         }
 
     def p_sample(self, model, xt, t, generator=None, mask=None, guide=None):
-        """Sample x_{t-1} ~ p_theta(x_{t-1} | x_t) = N(mu_theta(x_t, t), sigma_t^2 I)   (Eq. 5).
+        """Sample x_{t-1} ~ p_theta(x_{t-1} | x_t) = N(mu_theta(x_t, t), sigma_t^2 I)
+        (Eq. 5).
 
-        ``guide(x_hat, xt, t, out)``, if given, receives the unguided sample x_hat_{t-1} and the
-        model's mean/variance ``out`` and returns the x_{t-1} to use (the hook of Alg. 1-4).
+        ``guide(x_hat, xt, t, out)``, if given, receives the unguided sample x_hat_{t-1}
+        and the model's mean/variance ``out`` and returns the x_{t-1} to use (the hook
+        of Alg. 1-4).
         """
         with torch.no_grad():
             out = self.p_mean_variance(model, xt, t, mask)
-        z = torch.randn(xt.shape, generator=generator, dtype=xt.dtype).to(xt.device) if t > 1 else torch.zeros_like(xt)
+        z = (
+            torch.randn(xt.shape, generator=generator, dtype=xt.dtype).to(xt.device)
+            if t > 1
+            else torch.zeros_like(xt)
+        )
         x = out["mean"] + _extract(self.sigmas, t, xt) * z
         if guide is not None:
             x = guide(x, xt, t, out)
@@ -261,33 +351,75 @@ class GaussianDiffusion:
         return x, out
 
     def schedule(self, start=None, end=0, resample=1):
-        """The chain's steps in the order they are run, from ``start`` (None: T) down to ``end`` + 1.
+        """The chain's steps in the order they are run, from ``start`` (None: T) down to
+        ``end`` + 1.
 
-        resample: RePaint's resampling (Lugmayr et al. 2022, jump length 1): every step t > 1 appears
-        ``resample`` times in a row; between two runs of it, x_{t-1} is re-noised back to x_t ~ q(x_t | x_{t-1})
-        (Eq. 2), so that conditioned parts (the known frames of Alg. 3) and generated parts can harmonise.
-        end > 0 stops at x_end (to pick among chains half-way; ``start=end`` continues them)."""
+        resample: RePaint's resampling (Lugmayr et al. 2022, jump length 1): every step
+        t > 1 appears ``resample`` times in a row; between two runs of it, x_{t-1} is
+        re-noised back to x_t ~ q(x_t | x_{t-1}) (Eq. 2), so that conditioned parts (the
+        known frames of Alg. 3) and generated parts can harmonise. end > 0 stops at
+        x_end (to pick among chains half-way; ``start=end`` continues them).
+        """
         start = self.num_steps if start is None else start
-        if isinstance(resample, bool) or not isinstance(resample, (int, np.integer)) or resample < 1:
+        if (
+            isinstance(resample, bool)
+            or not isinstance(resample, (int, np.integer))
+            or resample < 1
+        ):
             raise ValueError(f"resample must be a positive integer, got {resample!r}")
-        if isinstance(start, bool) or not isinstance(start, (int, np.integer)) or not 1 <= start <= self.num_steps:
-            raise ValueError(f"the start step must be an integer in 1..{self.num_steps}, got {start!r}")
-        if isinstance(end, bool) or not isinstance(end, (int, np.integer)) or not 0 <= end < start:
-            raise ValueError(f"the end step must be an integer in 0..{start - 1} (below the start), got {end!r}")
-        return [t for t in range(start, end, -1) for _ in range(resample if t > 1 else 1)]
+        if (
+            isinstance(start, bool)
+            or not isinstance(start, (int, np.integer))
+            or not 1 <= start <= self.num_steps
+        ):
+            raise ValueError(
+                f"the start step must be an integer in 1..{self.num_steps}, got"
+                f" {start!r}"
+            )
+        if (
+            isinstance(end, bool)
+            or not isinstance(end, (int, np.integer))
+            or not 0 <= end < start
+        ):
+            raise ValueError(
+                f"the end step must be an integer in 0..{start - 1} (below the start),"
+                f" got {end!r}"
+            )
+        return [
+            t for t in range(start, end, -1) for _ in range(resample if t > 1 else 1)
+        ]
 
-    def sample(self, model, shape, seed=0, guide=None, callback=None, progress=True, mask=None):
-        """x_0 from the whole reverse chain, started at x_T ~ N(0, I) of ``shape`` (batch, frames, 68, 3).
+    def sample(
+        self, model, shape, seed=0, guide=None, callback=None, progress=True, mask=None
+    ):
+        """x_0 from the whole reverse chain, started at x_T ~ N(0, I) of ``shape``
+        (batch, frames, 68, 3).
 
-        callback(t, x_{t-1}, out) is called after every step (for animations and the downstream tasks);
-        ``guide`` is the sampler hook of Alg. 1-4 (:meth:`p_sample`).  Deterministic for a given seed."""
-        generator = seed if isinstance(seed, torch.Generator) else torch.Generator().manual_seed(seed)
-        return self.run(model, torch.randn(shape, generator=generator), generator, None, guide, callback, progress,
-                        mask)
+        callback(t, x_{t-1}, out) is called after every step (for animations and the
+        downstream tasks); ``guide`` is the sampler hook of Alg. 1-4 (:meth:`p_sample`).
+        Deterministic for a given seed.
+        """
+        generator = (
+            seed
+            if isinstance(seed, torch.Generator)
+            else torch.Generator().manual_seed(seed)
+        )
+        return self.run(
+            model,
+            torch.randn(shape, generator=generator),
+            generator,
+            None,
+            guide,
+            callback,
+            progress,
+            mask,
+        )
 
     def trace(self, model, shape, measures, seed=0, guide=None):
-        """:meth:`sample`, recording after every reverse step each of ``measures`` ({name: fn(t, x_{t-1}, out)
-        -> a number}, evaluated without gradients).  Returns (x_0, {"t": the time label of each x_{t-1} on the
+        """:meth:`sample`, recording after every reverse step each of ``measures``
+        ({name: fn(t, x_{t-1}, out)
+        -> a number}, evaluated without gradients).  Returns (x_0, {"t": the time label
+          of each x_{t-1} on the
         paper's scale, name: the values}): how a chain gets where it goes."""
         record = {"t": [], **{name: [] for name in measures}}
 
@@ -296,22 +428,50 @@ class GaussianDiffusion:
             with torch.no_grad():
                 for name, fn in measures.items():
                     record[name].append(fn(t, x, out))
-        return self.sample(model, shape, seed=seed, guide=guide, callback=callback, progress=False), record
 
-    def run(self, model, x, seed=0, steps=None, guide=None, callback=None, progress=True, mask=None):
-        """Run the chain's ``steps`` (:meth:`schedule`; None: all, from T) on x, which holds x at the first
-        of them (x_T, or x_k to continue a chain or re-noised data, SDEdit); returns x after the last.
+        return (
+            self.sample(
+                model, shape, seed=seed, guide=guide, callback=callback, progress=False
+            ),
+            record,
+        )
 
-        seed: an int, or a torch.Generator to continue its random stream (a chain stopped half-way continues
-        exactly as if it had not stopped).  A step that repeats the one before is RePaint's resampling:
-        x_{t-1} is first re-noised back to x_t (Eq. 2)."""
-        generator = seed if isinstance(seed, torch.Generator) else torch.Generator().manual_seed(seed)
+    def run(
+        self,
+        model,
+        x,
+        seed=0,
+        steps=None,
+        guide=None,
+        callback=None,
+        progress=True,
+        mask=None,
+    ):
+        """Run the chain's ``steps`` (:meth:`schedule`; None: all, from T) on x, which
+        holds x at the first of them (x_T, or x_k to continue a chain or re-noised data,
+        SDEdit); returns x after the last.
+
+        seed: an int, or a torch.Generator to continue its random stream (a chain
+        stopped half-way continues exactly as if it had not stopped).  A step that
+        repeats the one before is RePaint's resampling: x_{t-1} is first re-noised back
+        to x_t (Eq. 2)."""
+        generator = (
+            seed
+            if isinstance(seed, torch.Generator)
+            else torch.Generator().manual_seed(seed)
+        )
         steps = self.schedule() if steps is None else list(steps)
-        device = next(model.parameters()).device if hasattr(model, "parameters") else torch.device("cpu")
+        device = (
+            next(model.parameters()).device
+            if hasattr(model, "parameters")
+            else torch.device("cpu")
+        )
         x = x.to(device)
         if mask is not None:
             x = x * mask[:, :, None, None]
-        for i, t in enumerate(tqdm(steps, desc="sampling", disable=not progress, leave=False)):
+        for i, t in enumerate(
+            tqdm(steps, desc="sampling", disable=not progress, leave=False)
+        ):
             if i > 0 and t == steps[i - 1]:
                 x = self.q_step(x, t, generator)
             x, out = self.p_sample(model, x, t, generator, mask, guide)
@@ -362,27 +522,36 @@ class GaussianDiffusion:
                 path.append(xt)
         return path if trajectory else path[-1]
 
-    # ----------------------------------------------------------------------------- training
+    # -----------------------------------------------------------------------------
+    # training
     def snr(self, t):
-        """The signal-to-noise ratio SNR_t = abar_t / (1 - abar_t) of x_t (float64 numpy, t >= 1)."""
+        """The signal-to-noise ratio SNR_t = abar_t / (1 - abar_t) of x_t (float64
+        numpy, t >= 1)."""
         t = np.asarray(t)
         if t.size and t.min() < 1:
-            raise ValueError("the signal-to-noise ratio is defined for the noisy steps t >= 1")
+            raise ValueError(
+                "the signal-to-noise ratio is defined for the noisy steps t >= 1"
+            )
         return self.alphas_bar[t] / (1.0 - self.alphas_bar[t])
 
     def loss_weights(self, t, prediction="eps", min_snr_gamma=None):
-        """The weight w_t of step t's eps-loss ||eps - eps_hat||^2 that makes it another objective (float64).
+        """The weight w_t of step t's eps-loss ||eps - eps_hat||^2 that makes it another
+        objective (float64).
 
-        A network's x0 or v estimate is a fixed linear function of its eps estimate at step t, so each target's
-        loss is the eps-loss times a function of SNR_t:  ||x0 - x0_hat||^2 = ||eps - eps_hat||^2 / SNR_t and
-        ||v - v_hat||^2 = (1 + 1 / SNR_t) ||eps - eps_hat||^2.  Min-SNR-gamma (Hang et al. 2023) weighs the x0-loss
-        by min(SNR_t, gamma), i.e. the eps-loss by min(SNR_t, gamma) / SNR_t, whatever the target (``prediction``
-        then only changes what the network outputs, not the loss)."""
+        A network's x0 or v estimate is a fixed linear function of its eps estimate at
+        step t, so each target's loss is the eps-loss times a function of SNR_t:  ||x0 -
+        x0_hat||^2 = ||eps - eps_hat||^2 / SNR_t and ||v - v_hat||^2 = (1 + 1 / SNR_t)
+        ||eps - eps_hat||^2.  Min-SNR-gamma (Hang et al. 2023) weighs the x0-loss by
+        min(SNR_t, gamma), i.e. the eps-loss by min(SNR_t, gamma) / SNR_t, whatever the
+        target (``prediction`` then only changes what the network outputs, not the
+        loss)."""
         check_prediction(prediction)
         snr = self.snr(t)
         if min_snr_gamma is not None:
             return np.minimum(snr, min_snr_gamma) / snr
-        return {"eps": np.ones_like(snr), "x0": 1.0 / snr, "v": 1.0 + 1.0 / snr}[prediction]
+        return {"eps": np.ones_like(snr), "x0": 1.0 / snr, "v": 1.0 + 1.0 / snr}[
+            prediction
+        ]
 
     def training_loss(
         self,
@@ -408,15 +577,15 @@ class GaussianDiffusion:
                 1, self.num_steps + 1, (x0.shape[0],), generator=generator
             )
         if eps is None:
-            eps = torch.randn(
-                x0.shape, generator=generator, dtype=x0.dtype
-            ).to(x0.device)
+            eps = torch.randn(x0.shape, generator=generator, dtype=x0.dtype).to(
+                x0.device
+            )
         xt = self.q_sample(x0, t, eps)
         pred = model(
             xt,
-            torch.as_tensor(
-                self.timesteps[t.cpu().numpy()], dtype=torch.float32
-            ).to(x0.device),
+            torch.as_tensor(self.timesteps[t.cpu().numpy()], dtype=torch.float32).to(
+                x0.device
+            ),
             mask,
             **model_inputs,
         )
@@ -431,24 +600,36 @@ class GaussianDiffusion:
         m = mask[:, :, None, None].to(err.dtype)
         return (err * m).sum() / (m.sum() * err.shape[2] * err.shape[3])
 
-    # ----------------------------------------------------------------------------- respacing
+    # -----------------------------------------------------------------------------
+    # respacing
     def respace(self, steps):
-        """The same trained model on fewer steps: keep the steps in ``steps`` (an int K for K evenly
-        spaced steps, or a list of paper steps), with betas recomputed from the kept abar
-        (Nichol & Dhariwal 2021).  The result feeds the model the original time labels."""
+        """The same trained model on fewer steps: keep the steps in ``steps`` (an int K
+        for K evenly spaced steps, or a list of paper steps), with betas recomputed from
+        the kept abar (Nichol & Dhariwal 2021).  The result feeds the model the original
+        time labels.
+        """
         if isinstance(steps, (int, np.integer)) and not isinstance(steps, bool):
             if not 1 <= steps <= self.num_steps:
                 raise ValueError(f"respace to 1..{self.num_steps} steps, got {steps}")
-            kept = np.unique(np.round(np.linspace(1, self.num_steps, steps)).astype(int))
+            kept = np.unique(
+                np.round(np.linspace(1, self.num_steps, steps)).astype(int)
+            )
         else:
             kept = np.unique(np.asarray(steps, dtype=int))
             if len(kept) == 0 or kept.min() < 1 or kept.max() > self.num_steps:
                 raise ValueError(f"respaced steps must lie in 1..{self.num_steps}")
         abar = self.alphas_bar[kept]
         betas = 1.0 - abar / np.concatenate([[1.0], abar[:-1]])
-        return GaussianDiffusion(betas, self.variance, timesteps=np.concatenate([[0], self.timesteps[kept]]),
-                                 eta=self.eta)
+        return GaussianDiffusion(
+            betas,
+            self.variance,
+            timesteps=np.concatenate([[0], self.timesteps[kept]]),
+            eta=self.eta,
+        )
 
     def with_eta(self, eta):
-        """The same chain (steps, time labels) sampled by DDIM with ``eta`` (None: the ancestral DDPM step)."""
-        return GaussianDiffusion(self.betas[1:], self.variance, timesteps=self.timesteps, eta=eta)
+        """The same chain (steps, time labels) sampled by DDIM with ``eta`` (None: the
+        ancestral DDPM step)."""
+        return GaussianDiffusion(
+            self.betas[1:], self.variance, timesteps=self.timesteps, eta=eta
+        )

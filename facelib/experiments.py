@@ -1,6 +1,9 @@
-"""The inputs the book's tables and benchmarks measure the tasks on (not the sampling API: facelib.tasks is):
-the rows of Table 1, the inputs of Table 4, random AU-curve requests and keyframes that real motion can meet, and
-the rig fit's floor on real sequences.  Used by benchmarks/ and the chapters; each draws from a seed."""
+"""The inputs the book's tables and benchmarks measure the tasks on (not the sampling
+API: facelib.tasks is): the rows of Table 1, the inputs of Table 4, random AU-curve
+requests and keyframes that real motion can meet, and the rig fit's floor on real
+sequences.  Used by benchmarks/ and the chapters; each draws from a seed.
+"""
+
 from __future__ import annotations
 
 import numpy as np
@@ -48,73 +51,116 @@ def table1_generators(
 
 
 def table4_inputs(test, class_names, per_class=None):
-    """The inputs of Table 4 (§5.4) from a test split: its rows (``per_class`` per type-S class of
-    ``class_names``; None: all), their type-S labels, neutral landmarks (n, 68, 3) and known-frame masks
-    (n, F) (frame 1 for N2E, frame F for E2N)."""
+    """The inputs of Table 4 (§5.4) from a test split: its rows (``per_class`` per
+    type-S class of ``class_names``; None: all), their type-S labels, neutral landmarks
+    (n, 68, 3) and known-frame masks (n, F) (frame 1 for N2E, frame F for E2N)."""
     targets = test.targets("S")
-    rows = np.concatenate([np.flatnonzero(targets == c)[:per_class] for c in range(len(class_names))])
+    rows = np.concatenate(
+        [np.flatnonzero(targets == c)[:per_class] for c in range(len(class_names))]
+    )
     labels = [class_names[c] for c in targets[rows]]
     known = np.zeros((len(rows), test.landmarks.shape[1]), bool)
-    known[np.arange(len(rows)), [0 if lab.endswith("N2E") else -1 for lab in labels]] = True
+    known[
+        np.arange(len(rows)), [0 if lab.endswith("N2E") else -1 for lab in labels]
+    ] = True
     return rows, labels, test.sequence_neutrals()[rows], known
 
 
-def random_requests(n, seed=0, dataset="coma", aus=None, pairs=None, low=AU_REQUEST_PEAK[0],
-                    high=AU_REQUEST_PEAK[1], peak_frames=AU_REQUEST_PEAK_FRAMES, num_frames=NUM_FRAMES):
-    """n random requests within the data's range: one AU (of ``aus``; default, every AU the data push to at
-    least 0.5) or one pair of ``pairs``, each a curve from 0 at frame 0 up to a peak in [low, min(high, the
-    data's highest)] at a frame in ``peak_frames`` (first, last), then to a value between 0 and the peak at the
-    last frame."""
+def random_requests(
+    n,
+    seed=0,
+    dataset="coma",
+    aus=None,
+    pairs=None,
+    low=AU_REQUEST_PEAK[0],
+    high=AU_REQUEST_PEAK[1],
+    peak_frames=AU_REQUEST_PEAK_FRAMES,
+    num_frames=NUM_FRAMES,
+):
+    """n random requests within the data's range: one AU (of ``aus``; default, every AU
+    the data push to at least 0.5) or one pair of ``pairs``, each a curve from 0 at
+    frame 0 up to a peak in [low, min(high, the data's highest)] at a frame in
+    ``peak_frames`` (first, last), then to a value between 0 and the peak at the last
+    frame."""
     rng = np.random.default_rng(seed)
     ranges = data_ranges(dataset)
     aus = aus or [a for a in AU_NAMES if ranges[a][1] >= 0.5 and a != "AU45"]
     first, last = peak_frames
     if not 0 < first <= last < num_frames - 1:
-        raise ValueError(f"peak_frames must be (first, last) with 0 < first <= last < {num_frames - 1}, "
-                         f"got {peak_frames!r}")
+        raise ValueError(
+            "peak_frames must be (first, last) with 0 < first <= last <"
+            f" {num_frames - 1}, got {peak_frames!r}"
+        )
     requests = []
     for _ in range(n):
-        chosen = pairs[rng.integers(len(pairs))] if pairs else (aus[rng.integers(len(aus))],)
+        chosen = (
+            pairs[rng.integers(len(pairs))] if pairs else (aus[rng.integers(len(aus))],)
+        )
         request = []
         for a in chosen:
             peak = rng.uniform(low, min(high, ranges[a][1]))
-            request.append(f"{a}:0@0,{peak:.2f}@{rng.integers(first, last + 1)},{rng.uniform(0, peak):.2f}"
-                           f"@{num_frames - 1}")
+            at, end = rng.integers(first, last + 1), rng.uniform(0, peak)
+            request.append(f"{a}:0@0,{peak:.2f}@{at},{end:.2f}@{num_frames - 1}")
         requests.append(request)
     return requests
 
 
 def fit_floor(dataset="coma", n=30, active=0.1):
-    """{AU: mean absolute error of the rig fit on real test sequences of ``dataset`` with their own faces, over
-    the entries where the AU is active (above ``active``)}: what the measurement of AU-curve control cannot
-    resolve (capture noise, AUs the landmarks barely see); AUs active in fewer than 20 entries are left out."""
+    """{AU: mean absolute error of the rig fit on real test sequences of ``dataset``
+    with their own faces, over the entries where the AU is active (above ``active``)}:
+    what the measurement of AU-curve control cannot resolve (capture noise, AUs the
+    landmarks barely see); AUs active in fewer than 20 entries are left out.
+    """
     test = data.load_dataset(dataset, "test")
     idx = np.linspace(0, len(test) - 1, n).round().astype(int)
     w = test.au_weights[idx]
-    fit = fitted_curves(test.landmarks[idx], [test.face(int(test.subjects[i])) for i in idx])
+    fit = fitted_curves(
+        test.landmarks[idx], [test.face(int(test.subjects[i])) for i in idx]
+    )
     on = np.abs(w) > active
-    return {a: float(np.abs(fit - w)[..., k][on[..., k]].mean()) for k, a in enumerate(AU_NAMES)
-            if on[..., k].sum() >= 20}
+    return {
+        a: float(np.abs(fit - w)[..., k][on[..., k]].mean())
+        for k, a in enumerate(AU_NAMES)
+        if on[..., k].sum() >= 20
+    }
 
 
-MOBILE_LANDMARKS = (8, 19, 24, 48, 54, 57)  # chin, brows, mouth corners, lower lip: what expressions move most
+# chin, brows, mouth corners, lower lip: what expressions move most
+MOBILE_LANDMARKS = (8, 19, 24, 48, 54, 57)
 
 
 def random_keys(n, seed=0, dataset="coma", landmarks=MOBILE_LANDMARKS, frames=(10, 35)):
-    """n random requests [(keys, neutral (68, 3))] that real motion can meet: for a random test sequence of
-    ``dataset`` (an N2E one), its subject's neutral face and one key, the displacement of one of ``landmarks``
-    at a frame in ``frames`` (first, last; our choice: after the onset, before the last frames) of that
-    sequence."""
+    """n random requests [(keys, neutral (68, 3))] that real motion can meet: for a
+    random test sequence of ``dataset`` (an N2E one), its subject's neutral face and one
+    key, the displacement of one of ``landmarks`` at a frame in ``frames`` (first, last;
+    our choice: after the onset, before the last frames) of that sequence."""
     test = data.load_dataset(dataset, "test")
     if not 0 < frames[0] <= frames[1] < test.landmarks.shape[1]:
-        raise ValueError(f"frames must be (first, last) with 0 < first <= last < {test.landmarks.shape[1]}, "
-                         f"got {frames!r}")
+        raise ValueError(
+            "frames must be (first, last) with 0 < first <= last <"
+            f" {test.landmarks.shape[1]}, got {frames!r}"
+        )
     n2e = np.flatnonzero(test.kinds == 0)
     rng = np.random.default_rng(seed)
     requests = []
     for i in rng.choice(n2e, n, replace=len(n2e) < n):
         neutral = test.neutral_landmarks(int(test.subjects[i]))
-        frame, landmark = int(rng.integers(frames[0], frames[1] + 1)), int(rng.choice(landmarks))
-        shift = test.landmarks[i, frame, landmark].astype(np.float64) - neutral[landmark]
-        requests.append(([{"frame": frame, "landmark": landmark, "displacement": shift.round(2).tolist()}], neutral))
+        frame, landmark = int(rng.integers(frames[0], frames[1] + 1)), int(
+            rng.choice(landmarks)
+        )
+        shift = (
+            test.landmarks[i, frame, landmark].astype(np.float64) - neutral[landmark]
+        )
+        requests.append(
+            (
+                [
+                    {
+                        "frame": frame,
+                        "landmark": landmark,
+                        "displacement": shift.round(2).tolist(),
+                    }
+                ],
+                neutral,
+            )
+        )
     return requests

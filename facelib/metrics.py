@@ -1,6 +1,8 @@
-"""Evaluation metrics (paper §5): accuracy, confusion matrix, FID, diversity, the realism checks of
-the denoiser chapter, the filling metrics (error on missing frames, seam smoothness) and coverage: the label
-mix, each region's amplitude, precision, recall, density and coverage of features."""
+"""Evaluation metrics (paper §5): accuracy, confusion matrix, FID, diversity, the
+realism checks of the denoiser chapter, the filling metrics (error on missing frames,
+seam smoothness) and coverage: the label mix, each region's amplitude, precision,
+recall, density and coverage of features."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -10,7 +12,10 @@ def accuracy(predicted, true):
     """Fraction of sequences whose predicted class equals the true class."""
     predicted, true = np.asarray(predicted), np.asarray(true)
     if predicted.shape != true.shape:
-        raise ValueError(f"predicted {predicted.shape} and true {true.shape} must have the same shape")
+        raise ValueError(
+            f"predicted {predicted.shape} and true {true.shape} must have the same"
+            " shape"
+        )
     return float((predicted == true).mean())
 
 
@@ -22,64 +27,93 @@ def confusion_matrix(predicted, true, num_classes):
 
 
 def resample_frames(sequences, num_frames):
-    """Linearly resample sequences (n, F, ...) to ``num_frames`` frames in normalised time."""
+    """Linearly resample sequences (n, F, ...) to ``num_frames`` frames in normalised
+    time."""
     x = np.asarray(sequences, dtype=np.float64)
     src = np.linspace(0.0, 1.0, x.shape[1])
     dst = np.linspace(0.0, 1.0, num_frames)
     idx = np.clip(np.searchsorted(src, dst, side="right") - 1, 0, x.shape[1] - 2)
-    w = ((dst - src[idx]) / (src[idx + 1] - src[idx])).reshape((1, -1) + (1,) * (x.ndim - 2))
+    w = ((dst - src[idx]) / (src[idx + 1] - src[idx])).reshape(
+        (1, -1) + (1,) * (x.ndim - 2)
+    )
     return ((1 - w) * x[:, idx] + w * x[:, idx + 1]).astype(np.float32)
 
 
 def nearest_neighbour_rmse(queries, references, exclude_self=False, return_index=False):
-    """For each query sequence, the RMSE (mm) to its closest reference sequence (same shape).
+    """For each query sequence, the RMSE (mm) to its closest reference sequence (same
+    shape).
 
-    RMSE over all frames, landmarks and coordinates.  Used to check that generated sequences
-    are new (not copies of training sequences): compare with held-out real sequences.
-    With ``return_index``, also the index of that closest reference.
+    RMSE over all frames, landmarks and coordinates.  Used to check that generated
+    sequences are new (not copies of training sequences): compare with held-out real
+    sequences. With ``return_index``, also the index of that closest reference.
     """
     import torch
+
     q = torch.as_tensor(np.asarray(queries, dtype=np.float32)).flatten(1)
     r = torch.as_tensor(np.asarray(references, dtype=np.float32)).flatten(1)
     if q.shape[1] != r.shape[1]:
-        raise ValueError(f"queries {tuple(q.shape)} and references {tuple(r.shape)} must have the same sequence shape")
+        raise ValueError(
+            f"queries {tuple(q.shape)} and references {tuple(r.shape)} must have the"
+            " same sequence shape"
+        )
     d = torch.cdist(q.double(), r.double()) / np.sqrt(q.shape[1])
     if exclude_self:
         d.fill_diagonal_(float("inf"))
     best = d.min(dim=1)
-    return (best.values.numpy(), best.indices.numpy()) if return_index else best.values.numpy()
+    return (
+        (best.values.numpy(), best.indices.numpy())
+        if return_index
+        else best.values.numpy()
+    )
 
 
 def temporal_roughness(sequences):
-    """Mean norm (mm) of the second difference over frames: how jerky a landmark motion is."""
+    """Mean norm (mm) of the second difference over frames: how jerky a landmark motion
+    is."""
     x = np.asarray(sequences, dtype=np.float64)
     return float(np.linalg.norm(x[:, 2:] - 2 * x[:, 1:-1] + x[:, :-2], axis=-1).mean())
 
 
 DISTANCE_PAIRS = {  # iBUG-68 landmark pairs: "bone-length-like" distances of a face
-    "outer eye corners": (36, 45), "inner eye corners": (39, 42), "brow span": (17, 26),
-    "nose length": (27, 30), "nose width": (31, 35), "jaw width": (0, 16), "face height": (27, 8),
-    "mouth width": (48, 54), "mouth opening": (51, 57), "inner lip gap": (62, 66),
+    "outer eye corners": (36, 45),
+    "inner eye corners": (39, 42),
+    "brow span": (17, 26),
+    "nose length": (27, 30),
+    "nose width": (31, 35),
+    "jaw width": (0, 16),
+    "face height": (27, 8),
+    "mouth width": (48, 54),
+    "mouth opening": (51, 57),
+    "inner lip gap": (62, 66),
 }
 
 
 def pair_distance(sequences, pair):
-    """Distance (mm) between the two landmarks of a DISTANCE_PAIRS entry (e.g. "mouth opening":
-    lip midpoints 51 and 57), for every frame: shape ``sequences.shape[:-2]``."""
+    """Distance (mm) between the two landmarks of a DISTANCE_PAIRS entry (e.g. "mouth
+    opening": lip midpoints 51 and 57), for every frame: shape
+    ``sequences.shape[:-2]``."""
     if pair not in DISTANCE_PAIRS:
-        raise ValueError(f"unknown landmark pair {pair!r}; known: {sorted(DISTANCE_PAIRS)}")
+        raise ValueError(
+            f"unknown landmark pair {pair!r}; known: {sorted(DISTANCE_PAIRS)}"
+        )
     i, j = DISTANCE_PAIRS[pair]
     x = np.asarray(sequences, dtype=np.float64)
     return np.linalg.norm(x[..., i, :] - x[..., j, :], axis=-1)
 
 
 def landmark_statistics(sequences):
-    """Per-frame statistics of landmark sequences (n, F, 68, 3): mean inter-landmark distances (mm)
-    of DISTANCE_PAIRS, and the mean frame-to-frame speed of a landmark (mm per frame)."""
+    """Per-frame statistics of landmark sequences (n, F, 68, 3): mean inter-landmark
+    distances (mm) of DISTANCE_PAIRS, and the mean frame-to-frame speed of a landmark
+    (mm per frame).
+    """
     x = np.asarray(sequences, dtype=np.float64)
-    stats = {name: float(np.linalg.norm(x[..., i, :] - x[..., j, :], axis=-1).mean())
-             for name, (i, j) in DISTANCE_PAIRS.items()}
-    stats["frame-to-frame speed"] = float(np.linalg.norm(np.diff(x, axis=1), axis=-1).mean())
+    stats = {
+        name: float(np.linalg.norm(x[..., i, :] - x[..., j, :], axis=-1).mean())
+        for name, (i, j) in DISTANCE_PAIRS.items()
+    }
+    stats["frame-to-frame speed"] = float(
+        np.linalg.norm(np.diff(x, axis=1), axis=-1).mean()
+    )
     return stats
 
 
@@ -148,24 +182,30 @@ def multimodality(features, labels, num_pairs=20, seed=0):
 
 
 def missing_frame_error(filled, truth, known):
-    """Mean per-landmark Euclidean error (mm) over the unknown frames (known: (n, F) or (F,) bool)."""
+    """Mean per-landmark Euclidean error (mm) over the unknown frames (known: (n, F) or
+    (F,) bool)."""
     a, b = np.asarray(filled, dtype=np.float64), np.asarray(truth, dtype=np.float64)
     if a.shape != b.shape:
-        raise ValueError(f"filled {a.shape} and true {b.shape} sequences must have the same shape")
+        raise ValueError(
+            f"filled {a.shape} and true {b.shape} sequences must have the same shape"
+        )
     unknown = ~np.broadcast_to(np.asarray(known, dtype=bool), a.shape[:2])
     return float(np.linalg.norm(a - b, axis=-1)[unknown].mean())
 
 
 def frame_speeds(sequences):
-    """Frame-to-frame motion (mm/frame): the mean over landmarks of ||x_{f+1} - x_f||, shape (n, F - 1)."""
+    """Frame-to-frame motion (mm/frame): the mean over landmarks of ||x_{f+1} - x_f||,
+    shape (n, F - 1)."""
     x = np.asarray(sequences, dtype=np.float64)
     return np.linalg.norm(x[:, 1:] - x[:, :-1], axis=-1).mean(-1)
 
 
 def steps_away_from_seams(known):
-    """Mask (n, F - 1) of the frame-to-frame steps between two unknown frames that do not touch a seam (no
-    known frame among the step's frames or their neighbours): where a filled sequence's own smoothness shows,
-    to compare with :func:`seam_steps`.  ``known`` (n, F) is True on the given frames."""
+    """Mask (n, F - 1) of the frame-to-frame steps between two unknown frames that do
+    not touch a seam (no known frame among the step's frames or their neighbours): where
+    a filled sequence's own smoothness shows, to compare with :func:`seam_steps`.
+    ``known`` (n, F) is True on the given frames.
+    """
     k = np.asarray(known, dtype=bool)
     if k.ndim != 2:
         raise ValueError(f"known must be an (n, F) mask, got shape {k.shape}")
@@ -174,25 +214,31 @@ def steps_away_from_seams(known):
 
 
 def seam_steps(sequences, known):
-    """Seam smoothness: the frame-to-frame motion (mm/frame, as :func:`frame_speeds`) across every
-    boundary between a known and an unknown frame.  A seam is invisible when this step is no larger
-    than the steps of real sequences (compare with ``frame_speeds(real)``); a generated part that
-    does not join the known one shows up as one large step.  Returns a flat array, one value per seam."""
+    """Seam smoothness: the frame-to-frame motion (mm/frame, as :func:`frame_speeds`)
+    across every boundary between a known and an unknown frame.  A seam is invisible
+    when this step is no larger than the steps of real sequences (compare with
+    ``frame_speeds(real)``); a generated part that does not join the known one shows up
+    as one large step.  Returns a flat array, one value per seam.
+    """
     x = np.asarray(sequences, dtype=np.float64)
     k = np.broadcast_to(np.asarray(known, dtype=bool), x.shape[:2])
-    i, f = np.nonzero(k[:, 1:] != k[:, :-1])  # a seam between frames f and f + 1 of sequence i
+    # a seam between frames f and f + 1 of sequence i
+    i, f = np.nonzero(k[:, 1:] != k[:, :-1])
     return frame_speeds(x)[i, f]
 
 
 def intervals_overlap(a, b):
-    """True when the intervals a = (low, high) and b share a point: the data cannot order the two
-    estimates (the book reads a difference only where the 95 % intervals separate)."""
+    """True when the intervals a = (low, high) and b share a point: the data cannot
+    order the two estimates (the book reads a difference only where the 95 % intervals
+    separate)."""
     return a[0] <= b[1] and b[0] <= a[1]
 
 
 def interval_order(a, b):
-    """How estimate a compares with b, read from their 95 % intervals (low, high): "lower" or
-    "higher" where the intervals separate, "overlaps" where the data cannot order them."""
+    """How estimate a compares with b, read from their 95 % intervals (low, high):
+    "lower" or "higher" where the intervals separate, "overlaps" where the data cannot
+    order them.
+    """
     if intervals_overlap(a, b):
         return "overlaps"
     return "lower" if a[1] < b[0] else "higher"
@@ -217,8 +263,7 @@ def bootstrap_interval(statistic, *samples, num_resamples=1000, level=0.95, seed
     arrays = [np.asarray(s) for s in samples]
     if not arrays or any(len(a) != len(arrays[0]) for a in arrays):
         raise ValueError(
-            "need samples with the same number of rows, "
-            f"got {[len(a) for a in arrays]}"
+            f"need samples with the same number of rows, got {[len(a) for a in arrays]}"
         )
     if len(arrays[0]) < 2:
         raise ValueError("a bootstrap interval needs at least 2 rows")
@@ -255,52 +300,80 @@ def completion_spread(completions, known):
     return np.array([dist[:, i, ~m[i]].mean() for i in range(len(m))])
 
 
-# ----------------------------------------------------------------------------- coverage (issue 43)
-# What a generator fails to produce, which means and nearest neighbours do not see: the label mix, the amplitude
-# of each region's motion, and how much of the data's feature distribution the samples reach.
+# ----------------------------------------------------------------------------- coverage
+# (issue 43) What a generator fails to produce, which means and nearest neighbours do
+# not see: the label mix, the amplitude of each region's motion, and how much of the
+# data's feature distribution the samples reach.
 
-AMPLITUDE_REGIONS = ("mouth opening", "mouth-corner excursion", "brow raise", "eye closure")
-_BROW_EYE = ((19, 37), (24, 44))  # middle of each brow to the upper lid below it (iBUG-68)
+AMPLITUDE_REGIONS = (
+    "mouth opening",
+    "mouth-corner excursion",
+    "brow raise",
+    "eye closure",
+)
+# middle of each brow to the upper lid below it (iBUG-68)
+_BROW_EYE = ((19, 37), (24, 44))
 _LIDS = ((37, 41), (38, 40), (43, 47), (44, 46))  # upper to lower eyelid, both eyes
 _CORNERS = (48, 54)
 
 
 def amplitudes(sequences):
-    """Each sequence's largest motion of four regions (mm), {region: (n,)} (:data:`AMPLITUDE_REGIONS`):
+    """Each sequence's largest motion of four regions (mm), {region: (n,)}
+    (:data:`AMPLITUDE_REGIONS`):
 
     * mouth opening: the largest inner-lip gap (landmarks 62-66) over the frames;
-    * mouth-corner excursion: the diameter of a mouth corner's path (the largest distance between two of its
-      positions), the larger of the two corners: how far a smile or a pull moves it, wherever the face starts;
-    * brow raise: the range over frames of the brow-to-upper-lid distance (landmarks 19-37, 24-44, averaged);
+    * mouth-corner excursion: the diameter of a mouth corner's path (the largest
+      distance between two of its positions), the larger of the two corners: how far a
+      smile or a pull moves it, wherever the face starts;
+    * brow raise: the range over frames of the brow-to-upper-lid distance (landmarks
+      19-37, 24-44, averaged);
     * eye closure: the range over frames of the eyelid gap (four lid pairs, averaged).
-    Ranges and diameters read a sequence's motion from N2E and E2N alike and ignore where the face sits."""
+    Ranges and diameters read a sequence's motion from N2E and E2N alike and ignore
+    where the face sits.
+    """
     x = np.asarray(sequences, dtype=np.float64)
     if x.ndim != 4 or x.shape[2:] != (68, 3) or x.shape[1] < 2:
-        raise ValueError(f"expected landmark sequences (n, F >= 2, 68, 3), got {x.shape}")
+        raise ValueError(
+            f"expected landmark sequences (n, F >= 2, 68, 3), got {x.shape}"
+        )
 
     def distance(pairs):
-        return np.mean([np.linalg.norm(x[:, :, i] - x[:, :, j], axis=-1) for i, j in pairs], axis=0)  # (n, F)
+        # (n, F)
+        return np.mean(
+            [np.linalg.norm(x[:, :, i] - x[:, :, j], axis=-1) for i, j in pairs], axis=0
+        )
 
     def diameter(k):
         p = x[:, :, k]  # (n, F, 3)
         return np.linalg.norm(p[:, :, None] - p[:, None], axis=-1).max((1, 2))
 
     brow, lids = distance(_BROW_EYE), distance(_LIDS)
-    return {"mouth opening": pair_distance(x, "inner lip gap").max(1),
-            "mouth-corner excursion": np.maximum(*(diameter(k) for k in _CORNERS)),
-            "brow raise": brow.max(1) - brow.min(1), "eye closure": lids.max(1) - lids.min(1)}
+    return {
+        "mouth opening": pair_distance(x, "inner lip gap").max(1),
+        "mouth-corner excursion": np.maximum(*(diameter(k) for k in _CORNERS)),
+        "brow raise": brow.max(1) - brow.min(1),
+        "eye closure": lids.max(1) - lids.min(1),
+    }
 
 
 def label_histogram(labels, num_classes):
     """The share of each class (num_classes,) among integer ``labels``."""
     labels = np.asarray(labels)
-    if labels.ndim != 1 or len(labels) == 0 or labels.min() < 0 or labels.max() >= num_classes:
-        raise ValueError(f"labels must be a non-empty 1-D array of classes in 0..{num_classes - 1}")
+    if (
+        labels.ndim != 1
+        or len(labels) == 0
+        or labels.min() < 0
+        or labels.max() >= num_classes
+    ):
+        raise ValueError(
+            f"labels must be a non-empty 1-D array of classes in 0..{num_classes - 1}"
+        )
     return np.bincount(labels, minlength=num_classes) / len(labels)
 
 
 def total_variation(p, q):
-    """Total variation distance 1/2 sum |p - q| between two histograms (0: the same mix, 1: disjoint)."""
+    """Total variation distance 1/2 sum |p - q| between two histograms (0: the same mix,
+    1: disjoint)."""
     p, q = np.asarray(p, dtype=np.float64), np.asarray(q, dtype=np.float64)
     if p.shape != q.shape:
         raise ValueError(f"histograms of different lengths: {p.shape} and {q.shape}")
@@ -308,16 +381,34 @@ def total_variation(p, q):
 
 
 def subset_total_variations(labels, reference, size, num_subsets=1000, seed=0):
-    """The reference for a generated set's label mix: the total variation to ``reference`` (a histogram) of
-    ``num_subsets`` random sets of ``size`` real ``labels`` drawn with replacement (so that a set as large as the
-    real one still varies): how far a real set of that size strays by chance alone.  Returns (num_subsets,)."""
+    """The reference for a generated set's label mix: the total variation to
+    ``reference`` (a histogram) of ``num_subsets`` random sets of ``size`` real
+    ``labels`` drawn with replacement (so that a set as large as the real one still
+    varies): how far a real set of that size strays by chance alone.  Returns
+    (num_subsets,).
+    """
     labels = np.asarray(labels)
-    if isinstance(size, bool) or not isinstance(size, (int, np.integer)) or size < 1 or len(labels) == 0:
-        raise ValueError(f"need real labels and a positive subset size, got {len(labels)} labels and size {size!r}")
+    if (
+        isinstance(size, bool)
+        or not isinstance(size, (int, np.integer))
+        or size < 1
+        or len(labels) == 0
+    ):
+        raise ValueError(
+            f"need real labels and a positive subset size, got {len(labels)} labels and"
+            f" size {size!r}"
+        )
     rng = np.random.default_rng(seed)
     k = len(reference)
-    return np.array([total_variation(label_histogram(labels[rng.integers(0, len(labels), size)], k), reference)
-                     for _ in range(num_subsets)])
+    return np.array(
+        [
+            total_variation(
+                label_histogram(labels[rng.integers(0, len(labels), size)], k),
+                reference,
+            )
+            for _ in range(num_subsets)
+        ]
+    )
 
 
 def _kth_neighbour_radii(features, k):
@@ -342,8 +433,10 @@ def precision_recall_coverage(real, generated, k=5):
     real = np.asarray(real, dtype=np.float64)
     generated = np.asarray(generated, dtype=np.float64)
     if real.ndim != 2 or generated.ndim != 2 or real.shape[1] != generated.shape[1]:
-        raise ValueError(f"need feature matrices (n, D) of one width, got {real.shape} "
-                         f"and {generated.shape}")
+        raise ValueError(
+            f"need feature matrices (n, D) of one width, got {real.shape} "
+            f"and {generated.shape}"
+        )
     largest = min(len(real), len(generated)) - 1
     if (
         isinstance(k, bool)
@@ -355,7 +448,9 @@ def precision_recall_coverage(real, generated, k=5):
     generated_radii = _kth_neighbour_radii(generated, k)
     d = np.linalg.norm(generated[:, None] - real[None], axis=-1)  # (generated, real)
     inside_real = d <= real_radii[None]
-    return {"precision": float(inside_real.any(1).mean()),
-            "recall": float((d <= generated_radii[:, None]).any(0).mean()),
-            "density": float(inside_real.sum(1).mean() / k),
-            "coverage": float((d.min(0) <= real_radii).mean())}
+    return {
+        "precision": float(inside_real.any(1).mean()),
+        "recall": float((d <= generated_radii[:, None]).any(0).mean()),
+        "density": float(inside_real.sum(1).mean() / k),
+        "coverage": float((d.min(0) <= real_radii).mean()),
+    }

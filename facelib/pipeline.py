@@ -1,7 +1,11 @@
-"""End to end (paper §3.3, the end-to-end chapter): a neutral mesh -> its landmarks -> geometry-adaptive generation
-of an expression (Alg. 4, with the book's defaults, config.GeometryAdaptive) -> the landmark-guided
-deformation of the mesh (facelib/deformation.py).  A mesh of another topology, units or pose is first registered
-(facelib/registration.py, the chapter "Your own face") and the motion carried back to its own vertices."""
+"""End to end (paper §3.3, the end-to-end chapter): a neutral mesh -> its landmarks ->
+geometry-adaptive generation of an expression (Alg. 4, with the book's defaults,
+config.GeometryAdaptive) -> the landmark-guided deformation of the mesh
+(facelib/deformation.py).  A mesh of another topology, units or pose is first registered
+(facelib/registration.py, the chapter "Your own face") and the motion carried back to
+its own vertices.
+"""
+
 from __future__ import annotations
 
 import time
@@ -15,22 +19,35 @@ from .face import COMA_LABELS
 from .face import template as tpl
 
 
-def animate(neutral_vertices, label, settings=config.GeometryAdaptive(), model=None, denoiser=None, guide=None,
-            progress=False, **overrides):
-    """End to end (the end-to-end chapter): a neutral mesh (V, 3) of the template topology -> its landmarks ->
-    geometry-adaptive generation of ``label`` (Alg. 4 with ``settings``, by default the book's: one pass,
-    reconstruction guidance; ``overrides`` such as order="E2N", steps=50, seed=1) -> deformation.
-    Returns (meshes (F, V, 3), landmarks (F, 68, 3), seconds per stage)."""
+def animate(
+    neutral_vertices,
+    label,
+    settings=config.GeometryAdaptive(),
+    model=None,
+    denoiser=None,
+    guide=None,
+    progress=False,
+    **overrides,
+):
+    """End to end (the end-to-end chapter): a neutral mesh (V, 3) of the template
+    topology -> its landmarks -> geometry-adaptive generation of ``label`` (Alg. 4 with
+    ``settings``, by default the book's: one pass, reconstruction guidance;
+    ``overrides`` such as order="E2N", steps=50, seed=1) -> deformation. Returns (meshes
+    (F, V, 3), landmarks (F, 68, 3), seconds per stage)."""
     if label not in COMA_LABELS:
-        raise ValueError(f"unknown label {label!r}; allowed (the CoMA-like set the models were trained on): "
-                         f"{', '.join(COMA_LABELS)}")
+        raise ValueError(
+            f"unknown label {label!r}; allowed (the CoMA-like set the models were"
+            f" trained on): {', '.join(COMA_LABELS)}"
+        )
     seconds = {}
     t0 = time.perf_counter()
     neutral = tpl.check_neutral_mesh(neutral_vertices)
     landmarks0 = neutral[tpl.get_template().landmark_index]
     seconds["landmarks"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    landmarks = tasks.geometry_adaptive(landmarks0, label, 1, settings, denoiser, guide, progress, **overrides)[0]
+    landmarks = tasks.geometry_adaptive(
+        landmarks0, label, 1, settings, denoiser, guide, progress, **overrides
+    )[0]
     seconds["generation"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     meshes = deformation.deform(neutral, landmarks, model=model)
@@ -40,9 +57,12 @@ def animate(neutral_vertices, label, settings=config.GeometryAdaptive(), model=N
 
 @dataclass
 class Animation:
-    """What :func:`animate_mesh` made: ``frames`` (F, V_user, 3) on the user's mesh (its units, pose, vertices and
-    triangles), ``template_frames`` (F, V, 3) the fitted template's (canonical pose, mm), the generated landmarks
-    (F, 68, 3), the registration (None when the mesh already was a canonical template mesh) and seconds per stage."""
+    """What :func:`animate_mesh` made: ``frames`` (F, V_user, 3) on the user's mesh (its
+    units, pose, vertices and triangles), ``template_frames`` (F, V, 3) the fitted
+    template's (canonical pose, mm), the generated landmarks (F, 68, 3), the
+    registration (None when the mesh already was a canonical template mesh) and seconds
+    per stage.
+    """
 
     frames: np.ndarray
     template_frames: np.ndarray
@@ -52,19 +72,36 @@ class Animation:
 
 
 def is_canonical_template(mesh, tolerance_mm=1.0):
-    """True when ``mesh`` (a registration.UserMesh) has the template's triangles and lies in the canonical pose in mm
-    (as `python -m facelib neutral` writes it): it is animated as it is, with no registration."""
+    """True when ``mesh`` (a registration.UserMesh) has the template's triangles and
+    lies in the canonical pose in mm (as `python -m facelib neutral` writes it): it is
+    animated as it is, with no registration.
+    """
     t = tpl.get_template()
-    if mesh.units != "mm" or mesh.vertices.shape != t.vertices.shape or not np.array_equal(mesh.faces, t.faces):
+    if (
+        mesh.units != "mm"
+        or mesh.vertices.shape != t.vertices.shape
+        or not np.array_equal(mesh.faces, t.faces)
+    ):
         return False
     _, r, shift = registration.similarity(mesh.vertices, t.vertices, scale=False)
-    return bool(np.linalg.norm(mesh.vertices @ r.T + shift - mesh.vertices, axis=1).max() < tolerance_mm)
+    return bool(
+        np.linalg.norm(mesh.vertices @ r.T + shift - mesh.vertices, axis=1).max()
+        < tolerance_mm
+    )
 
 
-def animate_mesh(mesh, label, registration_settings=config.Registration(), progress=False, **overrides):
-    """A reader's mesh (registration.UserMesh: any topology, units, pose) animated with ``label``: registration
-    (unless it is a canonical template mesh), :func:`animate` on the fitted template, the motion carried back
-    (Registration.transfer).  ``overrides`` go to :func:`animate` (order, steps, seed...)."""
+def animate_mesh(
+    mesh,
+    label,
+    registration_settings=config.Registration(),
+    progress=False,
+    **overrides,
+):
+    """A reader's mesh (registration.UserMesh: any topology, units, pose) animated with
+    ``label``: registration (unless it is a canonical template mesh), :func:`animate` on
+    the fitted template, the motion carried back (Registration.transfer).  ``overrides``
+    go to :func:`animate` (order, steps, seed...).
+    """
     seconds = {}
     if is_canonical_template(mesh):
         fit, neutral = None, mesh.vertices
@@ -73,9 +110,13 @@ def animate_mesh(mesh, label, registration_settings=config.Registration(), progr
         fit = registration.register(mesh, registration_settings)
         neutral = fit.neutral
         seconds["registration"] = time.perf_counter() - t0
-    template_frames, landmarks, stages = animate(neutral, label, progress=progress, **overrides)
+    template_frames, landmarks, stages = animate(
+        neutral, label, progress=progress, **overrides
+    )
     seconds.update(stages)
     t0 = time.perf_counter()
     frames = template_frames if fit is None else fit.transfer(template_frames)
     seconds["transfer"] = time.perf_counter() - t0
-    return Animation(np.asarray(frames), np.asarray(template_frames), landmarks, fit, seconds)
+    return Animation(
+        np.asarray(frames), np.asarray(template_frames), landmarks, fit, seconds
+    )

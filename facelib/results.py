@@ -1,21 +1,25 @@
 """Stored full-scale results: ``results/NAME.json``, a table and its provenance.
 
-A chapter runs a small live version of an experiment within its time budget; the full-scale one
-is a command (a script in benchmarks/ with ``--save NAME``; the chapter names it) that stores
-its table here together with what is needed to trust and to re-run it: the exact command, the
-facelib commit, the sha256 of every checkpoint it used, the seeds, n, steps, the wall time and
-the number of cores.
+A chapter runs a small live version of an experiment within its time budget; the
+full-scale one is a command (a script in benchmarks/ with ``--save NAME``; the chapter
+names it) that stores its table here together with what is needed to trust and to re-run
+it: the exact command, the facelib commit, the sha256 of every checkpoint it used, the
+seeds, n, steps, the wall time and the number of cores.
 
-A stored result is *stale* when a checkpoint it names no longer has the sha256 it recorded (the model was
-retrained after the experiment ran), when the datasets it records were built by another world (their
-fingerprint changed), or when a default of the settings it records (the config dataclasses a benchmark names
-as measured) has changed since (e.g. ``config.Fill.steps``): :func:`problems` says so, naming the file and
-what changed, and a test fails on every stale or malformed file. Files are written to a temporary file and
-renamed, so an interrupted command leaves the previous result intact. A result is not saved from a tree whose
-facelib/ or benchmarks/ have uncommitted changes (its commit would not name the code that made it), unless the
-command's ``--allow-dirty`` says so, which the result then records. Rows merged from several runs
-(:func:`merged_rows`) each keep the provenance of the run that made them (``row_provenance``).
+A stored result is *stale* when a checkpoint it names no longer has the sha256 it
+recorded (the model was retrained after the experiment ran), when the datasets it
+records were built by another world (their fingerprint changed), or when a default of
+the settings it records (the config dataclasses a benchmark names as measured) has
+changed since (e.g. ``config.Fill.steps``): :func:`problems` says so, naming the file
+and what changed, and a test fails on every stale or malformed file. Files are written
+to a temporary file and renamed, so an interrupted command leaves the previous result
+intact. A result is not saved from a tree whose facelib/ or benchmarks/ have uncommitted
+changes (its commit would not name the code that made it), unless the command's
+``--allow-dirty`` says so, which the result then records. Rows merged from several runs
+(:func:`merged_rows`) each keep the provenance of the run that made them
+(``row_provenance``).
 """
+
 from __future__ import annotations
 
 import datetime
@@ -33,13 +37,28 @@ from .checkpoints import checkpoint_paths, world_fingerprint
 
 RESULTS_DIR = config.RESULTS_DIR
 SCHEMA = 1
-# Every stored result has these keys (and nothing is optional): the table and its provenance.
+# Every stored result has these keys (and nothing is optional): the table and its
+# provenance.
 FIELDS = {
-    "schema": int, "name": str, "title": str, "command": str, "commit": str, "date": str,
-    "checkpoints": dict, "seeds": list, "n": int, "steps": list, "wall_time_s": float, "cores": int,
-    "torch_threads": int, "columns": list, "rows": list, "notes": str,
+    "schema": int,
+    "name": str,
+    "title": str,
+    "command": str,
+    "commit": str,
+    "date": str,
+    "checkpoints": dict,
+    "seeds": list,
+    "n": int,
+    "steps": list,
+    "wall_time_s": float,
+    "cores": int,
+    "torch_threads": int,
+    "columns": list,
+    "rows": list,
+    "notes": str,
 }
-# Recorded by every result saved since issue 42 (older files lack them and are not checked for them).
+# Recorded by every result saved since issue 42 (older files lack them and are not
+# checked for them).
 OPTIONAL = {"world": dict, "settings": dict, "row_provenance": list}
 WATCHED = ("facelib", "benchmarks")  # the code a result's commit must name
 
@@ -47,25 +66,38 @@ WATCHED = ("facelib", "benchmarks")  # the code a result's commit must name
 def result_path(name):
     """results/NAME.json; a name is letters, digits and underscores."""
     if not name or not name.replace("_", "").isalnum():
-        raise ValueError(f"a result name is letters, digits and underscores, got {name!r}")
+        raise ValueError(
+            f"a result name is letters, digits and underscores, got {name!r}"
+        )
     return RESULTS_DIR / f"{name}.json"
 
 
 def _git(*args):
-    return subprocess.run(["git", *args], cwd=config.PROJECT_ROOT, capture_output=True, text=True,
-                          timeout=30).stdout.strip()
+    return subprocess.run(
+        ["git", *args],
+        cwd=config.PROJECT_ROOT,
+        capture_output=True,
+        text=True,
+        timeout=30,
+    ).stdout.strip()
 
 
 def uncommitted_code():
-    """The files of facelib/ and benchmarks/ with uncommitted changes (``git status --porcelain`` lines)."""
+    """The files of facelib/ and benchmarks/ with uncommitted changes (``git status
+    --porcelain`` lines)."""
     try:
-        return [line for line in _git("status", "--porcelain", "--", *WATCHED).splitlines() if line.strip()]
+        return [
+            line
+            for line in _git("status", "--porcelain", "--", *WATCHED).splitlines()
+            if line.strip()
+        ]
     except (OSError, subprocess.SubprocessError):
         return []
 
 
 def facelib_commit():
-    """The git commit of the working tree (with '+dirty' when facelib/ or benchmarks/ have uncommitted changes)."""
+    """The git commit of the working tree (with '+dirty' when facelib/ or benchmarks/
+    have uncommitted changes)."""
     try:
         commit = _git("rev-parse", "HEAD") or "unknown"
     except (OSError, subprocess.SubprocessError):
@@ -74,32 +106,49 @@ def facelib_commit():
 
 
 def check_clean(name, allow_dirty=False):
-    """Refuse (ValueError) to store results/NAME.json from a tree with uncommitted changes to facelib/ or
-    benchmarks/, unless ``allow_dirty`` (a command's --allow-dirty)."""
+    """Refuse (ValueError) to store results/NAME.json from a tree with uncommitted
+    changes to facelib/ or benchmarks/, unless ``allow_dirty`` (a command's
+    --allow-dirty)."""
     changed = uncommitted_code()
     if changed and not allow_dirty:
-        raise ValueError(f"results/{name}.json not written: {', '.join(WATCHED)} have uncommitted changes "
-                         f"({'; '.join(changed[:5])}{' ...' if len(changed) > 5 else ''}), so the commit it would "
-                         "record does not name the code that made it; commit them and re-run, or pass "
-                         "--allow-dirty (recorded in the result)")
+        raise ValueError(
+            f"results/{name}.json not written: {', '.join(WATCHED)} have uncommitted"
+            f" changes ({'; '.join(changed[:5])}{' ...' if len(changed) > 5 else ''}),"
+            " so the commit it would record does not name the code that made it;"
+            " commit them and re-run, or pass --allow-dirty (recorded in the result)"
+        )
 
 
 def check_save_args(args):
-    """Right after a benchmark parses its arguments: refuse ``--save`` from uncommitted code before any compute."""
+    """Right after a benchmark parses its arguments: refuse ``--save`` from uncommitted
+    code before any compute."""
     if getattr(args, "save", None):
         result_path(args.save)
         check_clean(args.save, args.allow_dirty)
 
 
 def add_save_options(parser):
-    """--save NAME and --allow-dirty for a benchmark that stores its table in results/NAME.json."""
-    parser.add_argument("--save", metavar="NAME", default=None, help="store the table in results/NAME.json "
-                        "(refused from a tree with uncommitted changes to facelib/ or benchmarks/)")
-    parser.add_argument("--allow-dirty", action="store_true", help="with --save: store it even so (recorded)")
+    """--save NAME and --allow-dirty for a benchmark that stores its table in
+    results/NAME.json."""
+    parser.add_argument(
+        "--save",
+        metavar="NAME",
+        default=None,
+        help=(
+            "store the table in results/NAME.json "
+            "(refused from a tree with uncommitted changes to facelib/ or benchmarks/)"
+        ),
+    )
+    parser.add_argument(
+        "--allow-dirty",
+        action="store_true",
+        help="with --save: store it even so (recorded)",
+    )
 
 
 def invoking_command():
-    """The command line that is running, as a reader would type it from the repository root."""
+    """The command line that is running, as a reader would type it from the repository
+    root."""
     script = Path(sys.argv[0])
     if script.name == "__main__.py":
         head = f"python -m {script.parent.name}"
@@ -112,7 +161,8 @@ def invoking_command():
 
 
 def checkpoint_sha256(name):
-    """The sha256 recorded in a shipped checkpoint's JSON (what :func:`checkpoints.load_checkpoint` checks)."""
+    """The sha256 recorded in a shipped checkpoint's JSON (what
+    :func:`checkpoints.load_checkpoint` checks)."""
     _, js = checkpoint_paths(name)
     if not js.exists():
         raise FileNotFoundError(f"checkpoint {name!r} not found in {js.parent}")
@@ -121,10 +171,12 @@ def checkpoint_sha256(name):
 
 @dataclass(frozen=True)
 class Run:
-    """How a stored result was measured: the shipped checkpoints it used (their sha256 are read from
-    data/checkpoints), the seeds, the sequences per row, the reverse steps, its wall time, and the
-    command that rewrites it (None: the command line of this process), whether it may be stored from a tree
-    with uncommitted code, and the settings (config dataclass instances) whose values it measured."""
+    """How a stored result was measured: the shipped checkpoints it used (their sha256
+    are read from data/checkpoints), the seeds, the sequences per row, the reverse
+    steps, its wall time, and the command that rewrites it (None: the command line of
+    this process), whether it may be stored from a tree with uncommitted code, and the
+    settings (config dataclass instances) whose values it measured.
+    """
 
     checkpoints: list
     seeds: list
@@ -133,31 +185,50 @@ class Run:
     wall_time_s: float
     command: str | None = None
     allow_dirty: bool = False  # the command's --allow-dirty
-    settings: tuple = ()  # the config dataclasses whose defaults the result measured (staleness compares them)
+    # the config dataclasses whose defaults the result measured (staleness compares
+    # them)
+    settings: tuple = ()
 
 
 def save_result(name, title, columns, rows, run, notes="", row_provenance=None):
-    """Write results/NAME.json (the table and its :class:`Run`) atomically; returns its path.
+    """Write results/NAME.json (the table and its :class:`Run`) atomically; returns its
+    path.
 
-    ``columns`` names the entries of every row (a row is a list, one entry per column: a number, a
-    string, or a [low, high] 95 % interval).  ``row_provenance`` (from :func:`merged_rows`): per row, the
-    provenance of the run that made it (None: this run)."""
+    ``columns`` names the entries of every row (a row is a list, one entry per column: a
+    number, a string, or a [low, high] 95 % interval).  ``row_provenance`` (from
+    :func:`merged_rows`): per row, the provenance of the run that made it (None: this
+    run)."""
     path = result_path(name)
     check_clean(name, run.allow_dirty)
     bad = [r for r in rows if len(r) != len(columns)]
     if bad:
-        raise ValueError(f"every row needs {len(columns)} entries ({columns}), got {bad[0]}")
+        raise ValueError(
+            f"every row needs {len(columns)} entries ({columns}), got {bad[0]}"
+        )
     commit = facelib_commit()
     record = {
-        "schema": SCHEMA, "name": name, "title": title,
+        "schema": SCHEMA,
+        "name": name,
+        "title": title,
         "command": run.command or invoking_command(),
-        "commit": commit + (" (stored with --allow-dirty)" if commit.endswith("+dirty") else ""),
-        "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
+        "commit": (
+            commit
+            + (" (stored with --allow-dirty)" if commit.endswith("+dirty") else "")
+        ),
+        "date": (
+            datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+        ),
         "checkpoints": {c: checkpoint_sha256(c) for c in sorted(run.checkpoints)},
-        "seeds": [int(s) for s in run.seeds], "n": int(run.n), "steps": [int(s) for s in run.steps],
-        "wall_time_s": round(float(run.wall_time_s), 1), "cores": os.cpu_count() or 0,
-        "torch_threads": torch.get_num_threads(), "columns": list(columns), "rows": _plain(rows),
-        "notes": notes, "world": world_fingerprint(),
+        "seeds": [int(s) for s in run.seeds],
+        "n": int(run.n),
+        "steps": [int(s) for s in run.steps],
+        "wall_time_s": round(float(run.wall_time_s), 1),
+        "cores": os.cpu_count() or 0,
+        "torch_threads": torch.get_num_threads(),
+        "columns": list(columns),
+        "rows": _plain(rows),
+        "notes": notes,
+        "world": world_fingerprint(),
         "settings": {type(s).__name__: _plain(asdict(s)) for s in run.settings},
     }
     if row_provenance is not None:
@@ -174,12 +245,13 @@ def save_result(name, title, columns, rows, run, notes="", row_provenance=None):
 
 
 def merged_rows(name, rows, key_length=1):
-    """``rows`` merged into the stored results/NAME.json (when it exists): a stored row is replaced by the new
-    row with the same key (its first ``key_length`` entries), stored rows no new row replaces are kept in their
-    order, and new rows with a new key follow.  For benchmarks that re-run some of a table's rows.
+    """``rows`` merged into the stored results/NAME.json (when it exists): a stored row
+    is replaced by the new row with the same key (its first ``key_length`` entries),
+    stored rows no new row replaces are kept in their order, and new rows with a new key
+    follow.  For benchmarks that re-run some of a table's rows.
 
-    Returns (rows, row_provenance) for :func:`save_result`: per row None (made by this run) or the commit, date
-    and command of the run that made the stored row."""
+    Returns (rows, row_provenance) for :func:`save_result`: per row None (made by this
+    run) or the commit, date and command of the run that made the stored row."""
     path = result_path(name)
     if not path.exists():
         return list(rows), [None] * len(rows)
@@ -188,8 +260,10 @@ def merged_rows(name, rows, key_length=1):
     own = {k: stored[k] for k in ("commit", "date", "command")}
     provenance = stored.get("row_provenance") or [own] * len(stored["rows"])
     if len(provenance) != len(stored["rows"]):
-        raise ValueError(f"{path}: {len(provenance)} row provenances for {len(stored['rows'])} rows; re-run the "
-                         f"whole table: {stored['command']}")
+        raise ValueError(
+            f"{path}: {len(provenance)} row provenances for {len(stored['rows'])} rows;"
+            f" re-run the whole table: {stored['command']}"
+        )
     merged, origin = [], []
     for row, made_by in zip(stored["rows"], provenance):
         key = tuple(row[:key_length])
@@ -199,31 +273,55 @@ def merged_rows(name, rows, key_length=1):
 
 
 def problems(record, path="result"):
-    """What is wrong with a stored result: missing or mistyped fields, another schema, rows that do
-    not fit the columns, or checkpoints whose sha256 changed since it ran.  Empty when it is sound."""
+    """What is wrong with a stored result: missing or mistyped fields, another schema,
+    rows that do not fit the columns, or checkpoints whose sha256 changed since it ran.
+    Empty when it is sound.
+    """
     found = []
     for key, kind in FIELDS.items():
         if key not in record:
             found.append(f"{path}: missing field {key!r}")
-        elif not isinstance(record[key], kind) and not (kind is float and isinstance(record[key], int)):
-            found.append(f"{path}: field {key!r} should be {kind.__name__}, is {type(record[key]).__name__}")
+        elif not isinstance(record[key], kind) and not (
+            kind is float and isinstance(record[key], int)
+        ):
+            found.append(
+                f"{path}: field {key!r} should be {kind.__name__}, is"
+                f" {type(record[key]).__name__}"
+            )
     if found:
         return found
     if record["schema"] != SCHEMA:
-        found.append(f"{path}: schema {record['schema']}, this facelib reads schema {SCHEMA}")
-    found += [f"{path}: row {i} has {len(r)} entries for {len(record['columns'])} columns"
-              for i, r in enumerate(record["rows"]) if len(r) != len(record["columns"])]
+        found.append(
+            f"{path}: schema {record['schema']}, this facelib reads schema {SCHEMA}"
+        )
+    found += [
+        f"{path}: row {i} has {len(r)} entries for {len(record['columns'])} columns"
+        for i, r in enumerate(record["rows"])
+        if len(r) != len(record["columns"])
+    ]
     for key, kind in OPTIONAL.items():
         if key in record and not isinstance(record[key], kind):
-            found.append(f"{path}: field {key!r} should be {kind.__name__}, is {type(record[key]).__name__}")
-    if "row_provenance" in record and len(record["row_provenance"]) != len(record["rows"]):
-        found.append(f"{path}: {len(record['row_provenance'])} row provenances for {len(record['rows'])} rows")
+            found.append(
+                f"{path}: field {key!r} should be {kind.__name__}, is"
+                f" {type(record[key]).__name__}"
+            )
+    if "row_provenance" in record and len(record["row_provenance"]) != len(
+        record["rows"]
+    ):
+        found.append(
+            f"{path}: {len(record['row_provenance'])} row provenances for"
+            f" {len(record['rows'])} rows"
+        )
     if record.get("world") not in (None, world_fingerprint()):
-        found.append(f"{path}: stale, made on the datasets of world {record['world']}, this process builds "
-                     f"{world_fingerprint()}; re-run: {record['command']}")
+        found.append(
+            f"{path}: stale, made on the datasets of world {record['world']}, this"
+            f" process builds {world_fingerprint()}; re-run: {record['command']}"
+        )
     if isinstance(record.get("settings", {}), dict):
-        found += [f"{path}: stale, {change}; re-run: {record['command']}"
-                  for change in settings_changes(record.get("settings", {}))]
+        found += [
+            f"{path}: stale, {change}; re-run: {record['command']}"
+            for change in settings_changes(record.get("settings", {}))
+        ]
     for name, stored in record["checkpoints"].items():
         try:
             shipped = checkpoint_sha256(name)
@@ -231,31 +329,46 @@ def problems(record, path="result"):
             found.append(f"{path}: checkpoint {name!r} is no longer shipped")
             continue
         if shipped != stored:
-            found.append(f"{path}: stale, checkpoint {name!r} has sha256 {shipped[:12]}..., the result was "
-                         f"computed with {stored[:12]}...; re-run: {record['command']}")
+            found.append(
+                f"{path}: stale, checkpoint {name!r} has sha256 {shipped[:12]}..., the"
+                f" result was computed with {stored[:12]}...; re-run:"
+                f" {record['command']}"
+            )
     return found
 
 
 def settings_changes(recorded):
-    """What changed in the defaults of the config dataclasses a result recorded ({class name: fields}), e.g.
-    "config.Fill.steps was 100, is 50 now"; a class or field that no longer exists is a change too."""
+    """What changed in the defaults of the config dataclasses a result recorded ({class
+    name: fields}), e.g. "config.Fill.steps was 100, is 50 now"; a class or field that
+    no longer exists is a change too.
+    """
     changes = []
     for cls, values in recorded.items():
         if not hasattr(config, cls):
             changes.append(f"config.{cls} no longer exists")
             continue
         now = _plain(asdict(getattr(config, cls)()))
-        changes += [f"config.{cls}.{k} was {v!r}, is {now[k]!r} now" if k in now else f"config.{cls}.{k} is gone"
-                    for k, v in values.items() if now.get(k, object()) != v]
+        changes += [
+            (
+                f"config.{cls}.{k} was {v!r}, is {now[k]!r} now"
+                if k in now
+                else f"config.{cls}.{k} is gone"
+            )
+            for k, v in values.items()
+            if now.get(k, object()) != v
+        ]
     return changes
 
 
 def load_result(name):
-    """Read results/NAME.json; ValueError naming the file and what changed if it is stale or malformed."""
+    """Read results/NAME.json; ValueError naming the file and what changed if it is
+    stale or malformed."""
     path = result_path(name)
     if not path.exists():
-        raise FileNotFoundError(f"{path} not found; write it with the benchmark that stores it "
-                                f"(benchmarks/*.py --save {name}; the chapter names the command)")
+        raise FileNotFoundError(
+            f"{path} not found; write it with the benchmark that stores it "
+            f"(benchmarks/*.py --save {name}; the chapter names the command)"
+        )
     record = json.loads(path.read_text())
     found = problems(record, path.name)
     if found:
@@ -274,70 +387,119 @@ def row_dicts(record):
 
 
 def stored_row(record, key):
-    """The row of a stored result whose first cells are ``key`` (a tuple), e.g. ("label control (Alg. 1)",
-    "ddpm", 200); an error that lists the rows' first cells when no row starts so."""
+    """The row of a stored result whose first cells are ``key`` (a tuple), e.g. ("label
+    control (Alg. 1)", "ddpm", 200); an error that lists the rows' first cells when no
+    row starts so."""
     if isinstance(key, str):
-        raise TypeError(f"a row key is a tuple of the row's first cells, like ({key!r},), got the string {key!r}")
+        raise TypeError(
+            f"a row key is a tuple of the row's first cells, like ({key!r},), got the"
+            f" string {key!r}"
+        )
     key = tuple(key)
     for row in record["rows"]:
         if tuple(row[: len(key)]) == key:
             return row
     starts = [tuple(row[: len(key)]) for row in record["rows"]]
-    raise KeyError(f"results/{record['name']}: no row starts with {key}; the rows start with {starts}")
+    raise KeyError(
+        f"results/{record['name']}: no row starts with {key}; the rows start with"
+        f" {starts}"
+    )
 
 
 def stored_value(record, key, column, interval=False):
-    """The cell of ``column`` in the row ``key`` (:func:`stored_row`); ``interval``: the 95 % interval stored
-    in the column after it instead."""
+    """The cell of ``column`` in the row ``key`` (:func:`stored_row`); ``interval``: the
+    95 % interval stored in the column after it instead."""
     if column not in record["columns"]:
-        raise KeyError(f"results/{record['name']} has no column {column!r}; columns: {record['columns']}")
+        raise KeyError(
+            f"results/{record['name']} has no column {column!r}; columns:"
+            f" {record['columns']}"
+        )
     row, i = stored_row(record, key), record["columns"].index(column)
     if interval and not (i + 1 < len(row) and _is_interval(row[i + 1])):
-        raise ValueError(f"results/{record['name']}: the column after {column!r} holds no 95 % interval in row {key}")
+        raise ValueError(
+            f"results/{record['name']}: the column after {column!r} holds no 95 %"
+            f" interval in row {key}"
+        )
     return row[i + bool(interval)]
 
 
 def stored_cell(record, key, column, digits=0):
-    """'value [low, high]': the cell of ``column`` in the row ``key`` with its stored 95 % interval."""
-    return tables.interval_cell(stored_value(record, key, column), stored_value(record, key, column, True), digits)
+    """'value [low, high]': the cell of ``column`` in the row ``key`` with its stored 95
+    % interval."""
+    return tables.interval_cell(
+        stored_value(record, key, column),
+        stored_value(record, key, column, True),
+        digits,
+    )
 
 
-# Code changes that move the numbers of results stored before them without changing a checkpoint: the time of
-# the change's commit (as results record their date), what changed and the results it touches.  `python -m
-# facelib results` names them; they are re-run once, after the retrained denoisers (issue 43), and the chapters'
-# live numbers already use the new code.
+# Code changes that move the numbers of results stored before them without changing a
+# checkpoint: the time of the change's commit (as results record their date), what
+# changed and the results it touches.  `python -m facelib results` names them; they are
+# re-run once, after the retrained denoisers (issue 43), and the chapters' live numbers
+# already use the new code.
 CODE_CHANGES = [
-    ("2026-12-05 03:22 UTC", "one random stream per chain (issue 42: the first reverse step re-added x_T's noise)",
-     ("fill_defaults", "filling_table3", "geometry_table4", "geometry_lr", "fine_control_au", "fine_control_keyframes",
-      "animate_magnitudes", "text_table2_raw", "text_table2_enriched")),
+    (
+        "2026-12-05 03:22 UTC",
+        (
+            "one random stream per chain (issue 42: the first reverse step re-added"
+            " x_T's noise)"
+        ),
+        (
+            "fill_defaults",
+            "filling_table3",
+            "geometry_table4",
+            "geometry_lr",
+            "fine_control_au",
+            "fine_control_keyframes",
+            "animate_magnitudes",
+            "text_table2_raw",
+            "text_table2_enriched",
+        ),
+    ),
 ]
 
 
 def code_changes_since(record):
-    """The entries of :data:`CODE_CHANGES` made after ``record`` was stored that touch it."""
-    return [what for date, what, names in CODE_CHANGES
-            if record.get("name") in names and str(record.get("date", "")) < date]
+    """The entries of :data:`CODE_CHANGES` made after ``record`` was stored that touch
+    it."""
+    return [
+        what
+        for date, what, names in CODE_CHANGES
+        if record.get("name") in names and str(record.get("date", "")) < date
+    ]
 
 
 def catalogue():
-    """One line per stored result: its name, wall time, cores and torch threads, date, problems
-    (empty when sound and fresh), the code changes since it was stored that touch it (:data:`CODE_CHANGES`),
-    what it does not record (older results: world, settings) and the command that rewrites it."""
+    """One line per stored result: its name, wall time, cores and torch threads, date,
+    problems (empty when sound and fresh), the code changes since it was stored that
+    touch it (:data:`CODE_CHANGES`), what it does not record (older results: world,
+    settings) and the command that rewrites it.
+    """
     lines = []
     for name in stored_results():
         record = json.loads(result_path(name).read_text())
         found = problems(record, f"{name}.json")
-        lines.append(dict(name=name, minutes=record.get("wall_time_s", float("nan")) / 60,
-                          cores=record.get("cores"), threads=record.get("torch_threads"),
-                          date=record.get("date"), problems=found, command=record.get("command"),
-                          changes=code_changes_since(record),
-                          unrecorded=[k for k in ("world", "settings") if k not in record]))
+        lines.append(
+            dict(
+                name=name,
+                minutes=record.get("wall_time_s", float("nan")) / 60,
+                cores=record.get("cores"),
+                threads=record.get("torch_threads"),
+                date=record.get("date"),
+                problems=found,
+                command=record.get("command"),
+                changes=code_changes_since(record),
+                unrecorded=[k for k in ("world", "settings") if k not in record],
+            )
+        )
     return lines
 
 
 def _plain(value):
-    """JSON-ready copy: numpy scalars and arrays become Python numbers and lists; floats keep 6 significant
-    digits (a setting of 1e-05 stays 1e-05, a rate of 85.2071 % stays 85.2071)."""
+    """JSON-ready copy: numpy scalars and arrays become Python numbers and lists; floats
+    keep 6 significant digits (a setting of 1e-05 stays 1e-05, a rate of 85.2071 % stays
+    85.2071)."""
     if isinstance(value, dict):
         return {k: _plain(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
@@ -350,33 +512,52 @@ def _plain(value):
 
 
 def markdown_table(record, fmt="{:.2f}"):
-    """A stored result as a Markdown table under a line saying it is stored: its command and date.
+    """A stored result as a Markdown table under a line saying it is stored: its command
+    and date.
 
-    Numbers are formatted with ``fmt`` (those below 0.1 with two significant digits).  A column of
-    95 % intervals ([low, high] entries) is merged into the column before it, "value [low, high]",
-    so that wide tables fit the page.
+    Numbers are formatted with ``fmt`` (those below 0.1 with two significant digits).  A
+    column of 95 % intervals ([low, high] entries) is merged into the column before it,
+    "value [low, high]", so that wide tables fit the page.
     """
+
     def cell(v):
         if _is_interval(v):
             return f"[{fmt.format(v[0])}, {fmt.format(v[1])}]"
         if isinstance(v, float):
-            return f"{v:.2g}" if 0 < abs(v) < 0.1 else fmt.format(v)  # small settings: 0.0003, not 0.00
+            # small settings: 0.0003, not 0.00
+            return f"{v:.2g}" if 0 < abs(v) < 0.1 else fmt.format(v)
         return str(v)
-    columns, rows = list(record["columns"]), [[cell(v) for v in row] for row in record["rows"]]
+
+    columns, rows = list(record["columns"]), [
+        [cell(v) for v in row] for row in record["rows"]
+    ]
     for i in range(len(columns) - 1, 0, -1):
         values = [row[i] for row in record["rows"]]
-        if any(_is_interval(v) for v in values) and all(_is_interval(v) or v in ("", None) for v in values):
+        if any(_is_interval(v) for v in values) and all(
+            _is_interval(v) or v in ("", None) for v in values
+        ):
             columns[i - 1] = f"{columns[i - 1]} [95 % interval]"
             del columns[i]
             for row in rows:
                 row[i - 1] = f"{row[i - 1]} {row.pop(i)}".strip()
     path = result_path(record["name"])  # results/NAME.json
-    path = path.relative_to(config.PROJECT_ROOT) if path.is_relative_to(config.PROJECT_ROOT) else path
-    head = (f"*Stored result* `{path}`: {record['title']} (n = {record['n']}, "
-            f"{record['wall_time_s'] / 60:.0f} min on {record['cores']} cores with {record['torch_threads']} "
-            f"torch thread(s), {record['date']}; re-run: `{record['command']}`)\n\n")
+    path = (
+        path.relative_to(config.PROJECT_ROOT)
+        if path.is_relative_to(config.PROJECT_ROOT)
+        else path
+    )
+    head = (
+        f"*Stored result* `{path}`: {record['title']} (n = {record['n']},"
+        f" {record['wall_time_s'] / 60:.0f} min on {record['cores']} cores with"
+        f" {record['torch_threads']} torch thread(s), {record['date']}; re-run:"
+        f" `{record['command']}`)\n\n"
+    )
     return head + tables.markdown(columns, rows)
 
 
 def _is_interval(v):
-    return isinstance(v, (list, tuple)) and len(v) == 2 and all(isinstance(u, (int, float)) for u in v)
+    return (
+        isinstance(v, (list, tuple))
+        and len(v) == 2
+        and all(isinstance(u, (int, float)) for u in v)
+    )

@@ -2,14 +2,16 @@
 
 An identity is a coefficient vector ``s`` in R^14, drawn from N(0, I).  Each mode either
 
-* warps the canonical plane (x0, y0) -> (x, y) with a smooth, bounded field (``tanh(s_k)``
-  times a Gaussian-weighted displacement: eye spacing, jaw width, mouth width...), or
+* warps the canonical plane (x0, y0) -> (x, y) with a smooth, bounded field
+  (``tanh(s_k)`` times a Gaussian-weighted displacement: eye spacing, jaw width, mouth
+  width...), or
 * scales the depth bumps of a facial feature by ``exp(c s_k)`` (nose, lips, chin...).
 
-Depth is evaluated at the *canonical* coordinates and the vertices are then moved by the warp,
-so every vertex (and so every landmark) stays on its feature: the topology never changes.
-``s = 0`` gives the template.
+Depth is evaluated at the *canonical* coordinates and the vertices are then moved by the
+warp, so every vertex (and so every landmark) stays on its feature: the topology never
+changes. ``s = 0`` gives the template.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -18,8 +20,20 @@ from . import template as tpl
 from .template import bump, smoothstep
 
 IDENTITY_MODES = (
-    "face_width", "face_length", "jaw_width", "chin", "nose_length", "nose_width", "eye_spacing",
-    "eye_size", "brow", "lip_fullness", "mouth_width", "cheek_fullness", "face_depth", "asymmetry",
+    "face_width",
+    "face_length",
+    "jaw_width",
+    "chin",
+    "nose_length",
+    "nose_width",
+    "eye_spacing",
+    "eye_size",
+    "brow",
+    "lip_fullness",
+    "mouth_width",
+    "cheek_fullness",
+    "face_depth",
+    "asymmetry",
 )
 NUM_MODES = len(IDENTITY_MODES)
 
@@ -27,14 +41,17 @@ NUM_MODES = len(IDENTITY_MODES)
 def _as_coeffs(coeffs):
     s = np.asarray(coeffs, dtype=np.float64)
     if s.shape != (NUM_MODES,):
-        raise ValueError(f"identity coefficients must have shape ({NUM_MODES},), got {s.shape}")
+        raise ValueError(
+            f"identity coefficients must have shape ({NUM_MODES},), got {s.shape}"
+        )
     if not np.all(np.isfinite(s)):
         raise ValueError("identity coefficients contain NaN or inf")
     return s
 
 
 def depth_gains(coeffs):
-    """Per-feature depth gains (template.GAIN_GROUPS) of an identity: exp of its modes."""
+    """Per-feature depth gains (template.GAIN_GROUPS) of an identity: exp of its
+    modes."""
     s = _as_coeffs(coeffs)
     m = dict(zip(IDENTITY_MODES, s))
     return {
@@ -85,11 +102,14 @@ def warp(canonical, coeffs):
 
 
 def neutral_vertices(coeffs, template=None):
-    """Neutral face mesh (V, 3) in mm of the identity with mode coefficients ``coeffs``."""
+    """Neutral face mesh (V, 3) in mm of the identity with mode coefficients
+    ``coeffs``."""
     t = template or tpl.get_template()
     s = _as_coeffs(coeffs)
     x0, y0 = t.canonical[:, 0], t.canonical[:, 1]
-    z = tpl.depth(x0, y0, depth_gains(s)) * np.exp(0.05 * s[IDENTITY_MODES.index("face_depth")])
+    z = tpl.depth(x0, y0, depth_gains(s)) * np.exp(
+        0.05 * s[IDENTITY_MODES.index("face_depth")]
+    )
     xy = warp(t.canonical, s)
     vertices = np.concatenate([xy, z[:, None]], axis=1)
     return tpl.place_mouth_band(vertices, t)

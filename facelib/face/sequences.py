@@ -1,15 +1,17 @@
 """Temporal AU curves and 4D sequences (N2E / E2N), as in the paper's data (§4).
 
-Time is normalised, tau = f / (F - 1) for frame f of F, so a sequence can be drawn at any length
-with the same expression.  An N2E sequence rises from the neutral face to the apex:
+Time is normalised, tau = f / (F - 1) for frame f of F, so a sequence can be drawn at
+any length with the same expression.  An N2E sequence rises from the neutral face to the
+apex:
 
     w_a(tau) = apex_a * smoothstep((tau - onset_a) / duration_a)
 
 with a sequence onset and duration and a small per-AU jitter of both (AUs do not start
-together).  An E2N sequence is the mirror image: it starts at the apex and relaxes.  Blinks
-(AU45 pulses of ~0.1 time units) are sprinkled in, and the landmarks get i.i.d. Gaussian
-capture noise.
+together).  An E2N sequence is the mirror image: it starts at the apex and relaxes.
+Blinks (AU45 pulses of ~0.1 time units) are sprinkled in, and the landmarks get i.i.d.
+Gaussian capture noise.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -38,18 +40,26 @@ class Timing:
 def check_num_frames(num_frames):
     """Validate a sequence length and return it as an int."""
     if isinstance(num_frames, bool) or not isinstance(num_frames, (int, np.integer)):
-        raise ValueError(f"num_frames must be an integer in [{MIN_FRAMES}, {MAX_FRAMES}], got {num_frames!r}")
+        raise ValueError(
+            f"num_frames must be an integer in [{MIN_FRAMES}, {MAX_FRAMES}], got"
+            f" {num_frames!r}"
+        )
     if not MIN_FRAMES <= num_frames <= MAX_FRAMES:
-        raise ValueError(f"num_frames must be in [{MIN_FRAMES}, {MAX_FRAMES}], got {num_frames}")
+        raise ValueError(
+            f"num_frames must be in [{MIN_FRAMES}, {MAX_FRAMES}], got {num_frames}"
+        )
     return int(num_frames)
 
 
 def au_curves(apex, kind, num_frames, rng, timing=Timing()):
-    """AU intensity curves (F, NUM_AUS) for apex intensities (NUM_AUS,) and kind "N2E" / "E2N"."""
+    """AU intensity curves (F, NUM_AUS) for apex intensities (NUM_AUS,) and kind "N2E" /
+    "E2N"."""
     num_frames = check_num_frames(num_frames)
     apex = np.asarray(apex, float)
     if apex.shape != (NUM_AUS,) or not np.all(np.isfinite(apex)):
-        raise ValueError(f"apex must be a finite array of shape ({NUM_AUS},), got shape {apex.shape}")
+        raise ValueError(
+            f"apex must be a finite array of shape ({NUM_AUS},), got shape {apex.shape}"
+        )
     if kind not in ("N2E", "E2N"):
         raise ValueError(f"kind must be 'N2E' or 'E2N', got {kind!r}")
     tau = np.linspace(0.0, 1.0, num_frames)[:, None]

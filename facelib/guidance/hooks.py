@@ -1,27 +1,32 @@
-"""Guiding the reverse process of the unconditional DDPM (paper §3.2, App. C Alg. 1, 2 and 4): sampler hooks.
+"""Guiding the reverse process of the unconditional DDPM (paper §3.2, App. C Alg. 1, 2
+and 4): sampler hooks.
 
 The model is never changed: guidance is a hook ``guide(x_hat, xt, t, out)`` handed to
-:meth:`GaussianDiffusion.p_sample`, which receives the unguided sample x_hat_{t-1} ~ p_theta(. | x_t)
-(Alg. 1 lines 3-8), the chain's step t and the model's mean and variance ``out``, and returns the
-x_{t-1} to continue with.  Hooks speak in the chain's steps (``out["time"]`` is the noise level's time label);
-the scores they climb (facelib/guidance/scores.py, or a reader's plain function ``score(x, time)``) are made
+:meth:`GaussianDiffusion.p_sample`, which receives the unguided sample x_hat_{t-1} ~
+p_theta(. | x_t) (Alg. 1 lines 3-8), the chain's step t and the model's mean and
+variance ``out``, and returns the x_{t-1} to continue with.  Hooks speak in the chain's
+steps (``out["time"]`` is the noise level's time label); the scores they climb
+(facelib/guidance/scores.py, or a reader's plain function ``score(x, time)``) are made
 for the chain when the hook is built and receive the networks' time labels.
 
 * :class:`OptimisationGuidance`, the paper's choice (after Diffusion-LM [51]):
-      x_{t-1} = argmax_x [ lambda log p_theta(x | x_t) + score(x, t-1) ]       (Alg. 1 line 10)
-  approximated by a few Adagrad steps started from x_hat_{t-1}.  With sigma_t^2 the variance of
-  p_theta, lambda log p_theta(x | x_t) = -lambda ||x - mu||^2 / (2 sigma_t^2) + const: a spring that
-  holds x near the model's mean, stiffer at small t.
-* :class:`MeanShiftGuidance`, the classic classifier guidance (Sohl-Dickstein et al.; Dhariwal
-  & Nichol 2021, Alg. 1): x_{t-1} ~ N(mu + s sigma_t^2 grad_{x_t} log p_phi(y | x_t, t), sigma_t^2 I).
-  Paper §3.2 writes the shift with grad p_phi; the correct form has grad log p_phi.  Under DDIM (their
-  Alg. 2) the noise estimate moves instead: eps_hat = eps - s sqrt(1 - abar_t) grad_{x_t} log p_phi.
-* :class:`ReconstructionGuidance` (not in the paper; Ho et al. 2022, "video diffusion models", with
-  the normalised step of Chung et al. 2023, DPS): pull x_{t-1} along -grad_{x_t} ||x_0_hat(x_t)|S_K -
-  x_0|S_K||, so that the *unknown* frames agree with known ones (the remedy for Alg. 3 and 4's seams).
-* :class:`BestOfK` (not in the paper): K guided chains per sequence; at a chosen step the one the score
-  rates highest continues alone, a one-step particle filter.
+      x_{t-1} = argmax_x [ lambda log p_theta(x | x_t) + score(x, t-1) ]  (Alg. 1 l. 10)
+  approximated by a few Adagrad steps started from x_hat_{t-1}.  With sigma_t^2 the
+  variance of p_theta, lambda log p_theta(x | x_t) = -lambda ||x - mu||^2 / (2
+  sigma_t^2) + const: a spring that holds x near the model's mean, stiffer at small t.
+* :class:`MeanShiftGuidance`, the classic classifier guidance (Sohl-Dickstein et al.;
+  Dhariwal & Nichol 2021, Alg. 1): x_{t-1} ~ N(mu + s sigma_t^2 grad_{x_t} log p_phi(y |
+  x_t, t), sigma_t^2 I). Paper §3.2 writes the shift with grad p_phi; the correct form
+  has grad log p_phi.  Under DDIM (their Alg. 2) the noise estimate moves instead:
+  eps_hat = eps - s sqrt(1 - abar_t) grad_{x_t} log p_phi.
+* :class:`ReconstructionGuidance` (not in the paper; Ho et al. 2022, "video diffusion
+  models", with the normalised step of Chung et al. 2023, DPS): pull x_{t-1} along
+  -grad_{x_t} ||x_0_hat(x_t)|S_K - x_0|S_K||, so that the *unknown* frames agree with
+    known ones (the remedy for Alg. 3 and 4's seams).
+* :class:`BestOfK` (not in the paper): K guided chains per sequence; at a chosen step
+  the one the score rates highest continues alone, a one-step particle filter.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -34,14 +39,20 @@ from ..diffusion import GaussianDiffusion
 
 
 def _for_chain(score, diffusion):
-    """The score made for the chain's steps: the book's scores wrap their networks (``for_chain``); a plain
-    function ``score(x, time)`` is wrapped whole, so that it too receives the network's time label of the noise
-    level, not the respaced chain's step (guided-diffusion's spaced ``cond_fn``)."""
-    return score.for_chain(diffusion) if hasattr(score, "for_chain") else diffusion.wrap(score)
+    """The score made for the chain's steps: the book's scores wrap their networks
+    (``for_chain``); a plain function ``score(x, time)`` is wrapped whole, so that it
+    too receives the network's time label of the noise level, not the respaced chain's
+    step (guided-diffusion's spaced ``cond_fn``)."""
+    return (
+        score.for_chain(diffusion)
+        if hasattr(score, "for_chain")
+        else diffusion.wrap(score)
+    )
 
 
 def steps_of(t, x):
-    """The chain's step t as a (B,) float tensor for the batch x (what scores and networks are given)."""
+    """The chain's step t as a (B,) float tensor for the batch x (what scores and
+    networks are given)."""
     return torch.full((len(x),), float(t), device=x.device)
 
 
@@ -53,26 +64,36 @@ def log_p_theta(x, out):
 
 
 def gradient_at(xt, fn):
-    """grad_x sum(fn(x)) at x = x_t (fn returns one value per sequence), with gradients enabled
-    even inside the sampler's no-grad loop."""
+    """grad_x sum(fn(x)) at x = x_t (fn returns one value per sequence), with gradients
+    enabled even inside the sampler's no-grad loop."""
     with torch.enable_grad():
         x = xt.detach().clone().requires_grad_(True)
         return torch.autograd.grad(fn(x).sum(), x)[0]
 
 
 def _check_positive(name, value, allow_zero=False):
-    if (not isinstance(value, (int, float)) or isinstance(value, bool) or value != value or value < 0
-            or (value == 0 and not allow_zero)):
-        raise ValueError(f"{name} must be a {'non-negative' if allow_zero else 'positive'} number, got {value!r}")
+    if (
+        not isinstance(value, (int, float))
+        or isinstance(value, bool)
+        or value != value
+        or value < 0
+        or (value == 0 and not allow_zero)
+    ):
+        raise ValueError(
+            f"{name} must be a {'non-negative' if allow_zero else 'positive'} number,"
+            f" got {value!r}"
+        )
 
 
 @dataclass
 class OptimisationGuidance:
-    """Alg. 1 line 10: ``num_steps`` Adagrad steps (a fresh optimiser at every diffusion step)
-    maximising guidance_weight * log p_theta(x | x_t) + score(x, t-1), started from x_hat_{t-1}.
+    """Alg. 1 line 10: ``num_steps`` Adagrad steps (a fresh optimiser at every diffusion
+    step) maximising guidance_weight * log p_theta(x | x_t) + score(x, t-1), started
+    from x_hat_{t-1}.
 
-    max_time (not in the paper): leave the steps whose time label t is above it unguided, where the
-    guide reads nothing but noise (None: guide every step, as Alg. 1 and 2 do)."""
+    max_time (not in the paper): leave the steps whose time label t is above it
+    unguided, where the guide reads nothing but noise (None: guide every step, as Alg. 1
+    and 2 do)."""
 
     score: Callable
     diffusion: GaussianDiffusion
@@ -82,10 +103,14 @@ class OptimisationGuidance:
     max_time: float | None = None
 
     def __post_init__(self):
-        _check_positive("guidance_weight (lambda)", self.guidance_weight, allow_zero=True)
+        _check_positive(
+            "guidance_weight (lambda)", self.guidance_weight, allow_zero=True
+        )
         _check_positive("the Adagrad learning rate", self.lr)
         if not isinstance(self.num_steps, int) or self.num_steps < 1:
-            raise ValueError(f"num_steps must be a positive integer, got {self.num_steps!r}")
+            raise ValueError(
+                f"num_steps must be a positive integer, got {self.num_steps!r}"
+            )
         if self.max_time is not None:
             _check_positive("max_time", self.max_time)
         self.score = _for_chain(self.score, self.diffusion)
@@ -114,8 +139,10 @@ class OptimisationGuidance:
 
 @dataclass
 class MeanShiftGuidance:
-    """Classic classifier guidance: shift the sample by scale * sigma_t^2 * grad_{x_t} score(x_t, t); under DDIM,
-    take the step with eps - scale * sqrt(1 - abar_t) * grad_{x_t} score(x_t, t) instead."""
+    """Classic classifier guidance: shift the sample by scale * sigma_t^2 * grad_{x_t}
+    score(x_t, t); under DDIM, take the step with eps - scale * sqrt(1 - abar_t) *
+    grad_{x_t} score(x_t, t) instead.
+    """
 
     score: Callable
     diffusion: GaussianDiffusion
@@ -182,48 +209,85 @@ class ReconstructionGuidance:
 
 
 def best_particles(x, score, t, particles):
-    """Of ``particles`` candidates of each of n sequences, particle-major ((particles * n, ...): candidate j
-    of sequence i at j * n + i), for each sequence the one with the highest score(x, t) (B,): (n, ...)."""
-    if isinstance(particles, bool) or not isinstance(particles, int) or particles < 1 or len(x) % particles:
-        raise ValueError(f"particles must be a positive integer dividing the batch {len(x)}, got {particles!r}")
+    """Of ``particles`` candidates of each of n sequences, particle-major ((particles *
+    n, ...): candidate j of sequence i at j * n + i), for each sequence the one with the
+    highest score(x, t) (B,): (n, ...).
+    """
+    if (
+        isinstance(particles, bool)
+        or not isinstance(particles, int)
+        or particles < 1
+        or len(x) % particles
+    ):
+        raise ValueError(
+            f"particles must be a positive integer dividing the batch {len(x)}, got"
+            f" {particles!r}"
+        )
     n = len(x) // particles
     with torch.no_grad():
         s = score(x, t).reshape(particles, n)
     if not torch.isfinite(s).all():
         raise ValueError("the score of a particle is not finite")
-    return x.reshape(particles, n, *x.shape[1:])[s.argmax(0), torch.arange(n, device=x.device)]
+    return x.reshape(particles, n, *x.shape[1:])[
+        s.argmax(0), torch.arange(n, device=x.device)
+    ]
 
 
 @dataclass
 class BestOfK:
-    """Best-of-K around any guided chain (not in the paper): ``particles`` chains per sequence run down to
-    the chain's step ``select_step``; there, for each sequence, the chain that ``score`` rates highest
-    continues alone on the rest of the same random stream.  A one-step form of sequential Monte Carlo
-    (particle filtering) with the score as the potential: chains are picked where the score can read what
-    they are committing to.  About K times the cost above select_step."""
+    """Best-of-K around any guided chain (not in the paper): ``particles`` chains per
+    sequence run down to the chain's step ``select_step``; there, for each sequence, the
+    chain that ``score`` rates highest continues alone on the rest of the same random
+    stream.  A one-step form of sequential Monte Carlo (particle filtering) with the
+    score as the potential: chains are picked where the score can read what they are
+    committing to.  About K times the cost above select_step."""
 
     score: Callable
     particles: int
     select_step: int
 
     def sample(self, diffusion, model, shape, guide=None, seed=0, progress=True):
-        """n = shape[0] sequences from the chain ``diffusion`` with the hook ``guide`` (any batch size)."""
+        """n = shape[0] sequences from the chain ``diffusion`` with the hook ``guide``
+        (any batch size)."""
         if not 1 <= self.select_step < diffusion.num_steps:
-            raise ValueError(f"the selection step must be in 1..{diffusion.num_steps - 1} (below the chain's "
-                             f"first step), got {self.select_step}")
+            raise ValueError(
+                f"the selection step must be in 1..{diffusion.num_steps - 1} (below the"
+                f" chain's first step), got {self.select_step}"
+            )
         generator = torch.Generator().manual_seed(seed)
         x = torch.randn((self.particles * shape[0], *shape[1:]), generator=generator)
-        x = diffusion.run(model, x, generator, diffusion.schedule(end=self.select_step), guide, progress=progress)
-        x = best_particles(x, _for_chain(self.score, diffusion), steps_of(self.select_step, x), self.particles)
-        return diffusion.run(model, x, generator, diffusion.schedule(self.select_step), guide, progress=progress)
+        x = diffusion.run(
+            model,
+            x,
+            generator,
+            diffusion.schedule(end=self.select_step),
+            guide,
+            progress=progress,
+        )
+        x = best_particles(
+            x,
+            _for_chain(self.score, diffusion),
+            steps_of(self.select_step, x),
+            self.particles,
+        )
+        return diffusion.run(
+            model,
+            x,
+            generator,
+            diffusion.schedule(self.select_step),
+            guide,
+            progress=progress,
+        )
 
 
 def chain(*guides):
-    """One sampler hook that applies several guidance hooks in turn (None entries are skipped)."""
+    """One sampler hook that applies several guidance hooks in turn (None entries are
+    skipped)."""
     guides = [g for g in guides if g is not None]
 
     def guide(x_hat, xt, t, out):
         for g in guides:
             x_hat = g(x_hat, xt, t, out)
         return x_hat
+
     return guide

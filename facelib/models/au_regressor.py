@@ -1,15 +1,18 @@
-"""A noisy AU-intensity regressor R(x_t, t): the action-unit curves a noisy sequence is heading for.
+"""A noisy AU-intensity regressor R(x_t, t): the action-unit curves a noisy sequence is
+heading for.
 
-Not in the paper (the fine-control chapter).  AUBlendNet controls single meshes by action units; here
-a BiT reads x_t = q_sample(x_0, t) and returns, for every frame, the intensities (F, NUM_AUS) of the
-action units that made x_0 (the synthetic world knows them: ``FaceDataset.au_weights``).  Guidance
-climbs log N(c | R(x, t), tau^2) for requested curves c (guidance.AUCurveScore), as Alg. 1 climbs
-log p_phi(y | x, t).
+Not in the paper (the fine-control chapter).  AUBlendNet controls single meshes by
+action units; here a BiT reads x_t = q_sample(x_0, t) and returns, for every frame, the
+intensities (F, NUM_AUS) of the action units that made x_0 (the synthetic world knows
+them: ``FaceDataset.au_weights``).  Guidance climbs log N(c | R(x, t), tau^2) for
+requested curves c (guidance.AUCurveScore), as Alg. 1 climbs log p_phi(y | x, t).
 
-Like the guidance classifier it reads *motion* (the frames minus their mean frame), so that it does
-not need to know the face; the intensity of a frame is read relative to the rest of the sequence.
-Unlike it, every frame token has an output (no classification token).
+Like the guidance classifier it reads *motion* (the frames minus their mean frame), so
+that it does not need to know the face; the intensity of a frame is read relative to the
+rest of the sequence. Unlike it, every frame token has an output (no classification
+token).
 """
+
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
@@ -36,7 +39,8 @@ class AURegressorConfig:
 
 
 class AURegressor(BiT):
-    """R(x_t, t): (B, F, 68, 3) normalised landmarks, (B,) steps -> (B, F, num_aus) AU intensities."""
+    """R(x_t, t): (B, F, 68, 3) normalised landmarks, (B,) steps -> (B, F, num_aus) AU
+    intensities."""
 
     def __init__(self, config=AURegressorConfig()):
         c = config

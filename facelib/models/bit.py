@@ -1,16 +1,19 @@
-"""The bidirectional transformer (BiT) over frames shared by the paper's networks (§3.1-3.2, Fig. 1).
+"""The bidirectional transformer (BiT) over frames shared by the paper's networks
+(§3.1-3.2, Fig. 1).
 
-Each frame of x_t (68 x 3 landmark coordinates, normalised) becomes one token, the sum of
+Each frame of x_t (68 x 3 landmark coordinates, normalised) becomes one token, the sum
+of
 
 * FE(x_t)     feature embedding: one linear layer per frame, 204 -> width;
-* PE(1..F)    positional encoding of the frame index (sinusoidal, so any length F works);
+* PE(1..F)    positional encoding of the frame index (sinusoidal: any length F works);
 * TE(t)       temporal (diffusion-step) embedding: sinusoidal, then a 2-layer MLP.
 
-The encoder is *bidirectional*: no causal mask, every frame attends to every other frame.  The
-denoiser eps_theta (models/denoiser.py) reads one output per frame; the guidance classifier
-p_phi(y | x_t, t) (models/noisy_classifier.py) prepends a learnable classification token and
-reads its output.
+The encoder is *bidirectional*: no causal mask, every frame attends to every other
+frame.  The denoiser eps_theta (models/denoiser.py) reads one output per frame; the
+guidance classifier p_phi(y | x_t, t) (models/noisy_classifier.py) prepends a learnable
+classification token and reads its output.
 """
+
 from __future__ import annotations
 
 import math
@@ -20,10 +23,16 @@ from torch import nn
 
 
 def sinusoidal_embedding(positions, dim, max_period=10_000.0, dtype=torch.float32):
-    """Transformer sinusoids of (possibly fractional) positions (...,) -> (..., dim), on the positions' device;
-    computed in float32, returned as ``dtype`` (the network's, so that a float64 network stays float64)."""
+    """Transformer sinusoids of (possibly fractional) positions (...,) -> (..., dim), on
+    the positions' device; computed in float32, returned as ``dtype`` (the network's, so
+    that a float64 network stays float64).
+    """
     half = dim // 2
-    freqs = torch.exp(-math.log(max_period) * torch.arange(half, dtype=torch.float32, device=positions.device) / half)
+    freqs = torch.exp(
+        -math.log(max_period)
+        * torch.arange(half, dtype=torch.float32, device=positions.device)
+        / half
+    )
     args = positions.float()[..., None] * freqs
     emb = torch.cat([torch.sin(args), torch.cos(args)], dim=-1)
     return torch.nn.functional.pad(emb, (0, dim % 2)).to(dtype)
@@ -32,23 +41,41 @@ def sinusoidal_embedding(positions, dim, max_period=10_000.0, dtype=torch.float3
 def check_sequence_input(xt, t, mask, num_landmarks):
     """Validate (x_t, t, mask) of a BiT: (B, F, L, 3), (B,), (B, F) bool or None."""
     if xt.ndim != 4 or xt.shape[2:] != (num_landmarks, 3):
-        raise ValueError(f"x_t must have shape (batch, frames, {num_landmarks}, 3), got {tuple(xt.shape)}")
+        raise ValueError(
+            f"x_t must have shape (batch, frames, {num_landmarks}, 3), got"
+            f" {tuple(xt.shape)}"
+        )
     if t.shape != (xt.shape[0],):
-        raise ValueError(f"t must have shape ({xt.shape[0]},) (one step per sequence), got {tuple(t.shape)}")
+        raise ValueError(
+            f"t must have shape ({xt.shape[0]},) (one step per sequence), got"
+            f" {tuple(t.shape)}"
+        )
     if mask is not None and mask.shape != xt.shape[:2]:
-        raise ValueError(f"mask must have shape {tuple(xt.shape[:2])}, got {tuple(mask.shape)}")
+        raise ValueError(
+            f"mask must have shape {tuple(xt.shape[:2])}, got {tuple(mask.shape)}"
+        )
 
 
 class BiT(nn.Module):
-    """FE + PE + TE tokens through a bidirectional transformer encoder (pre-norm), then LayerNorm."""
+    """FE + PE + TE tokens through a bidirectional transformer encoder (pre-norm), then
+    LayerNorm."""
 
     def __init__(self, num_landmarks, width, depth, heads, ff, dropout=0.0):
         super().__init__()
         self.width = width
         self.fe = nn.Linear(num_landmarks * 3, width)
-        self.te = nn.Sequential(nn.Linear(width, width), nn.SiLU(), nn.Linear(width, width))
-        layer = nn.TransformerEncoderLayer(width, heads, ff, dropout, activation="gelu",
-                                           batch_first=True, norm_first=True)
+        self.te = nn.Sequential(
+            nn.Linear(width, width), nn.SiLU(), nn.Linear(width, width)
+        )
+        layer = nn.TransformerEncoderLayer(
+            width,
+            heads,
+            ff,
+            dropout,
+            activation="gelu",
+            batch_first=True,
+            norm_first=True,
+        )
         self.encoder = nn.TransformerEncoder(layer, depth, enable_nested_tensor=False)
         self.norm = nn.LayerNorm(width)
 

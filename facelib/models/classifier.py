@@ -1,12 +1,15 @@
-"""The independent classifier (IC) of the paper's evaluation (§5): one LSTM layer + a linear layer.
+"""The independent classifier (IC) of the paper's evaluation (§5): one LSTM layer + a
+linear layer.
 
-The IC reads a landmark sequence (B, F, 68, 3) in mm and predicts its label.  By default it
-looks at *motion*: each sequence minus its own mean shape over the frames.  Our choice, and a
-measured one (the face-world chapter): with only 9 training subjects, an LSTM on raw coordinates memorises
-the anatomy of those subjects and fails on new ones; removing the sequence's mean shape keeps
-everything about the expression (including N2E vs E2N order) and drops the anatomy.
-``inputs="absolute"`` gives the raw-coordinate variant for comparison.
+The IC reads a landmark sequence (B, F, 68, 3) in mm and predicts its label.  By default
+it looks at *motion*: each sequence minus its own mean shape over the frames.  Our
+choice, and a measured one (the face-world chapter): with only 9 training subjects, an
+LSTM on raw coordinates memorises the anatomy of those subjects and fails on new ones;
+removing the sequence's mean shape keeps everything about the expression (including N2E
+vs E2N order) and drops the anatomy. ``inputs="absolute"`` gives the raw-coordinate
+variant for comparison.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -17,7 +20,8 @@ INPUTS = ("motion", "absolute")
 
 
 class LSTMClassifier(nn.Module):
-    """One LSTM layer over frames + a linear layer on its last hidden state (paper §5, as in [62])."""
+    """One LSTM layer over frames + a linear layer on its last hidden state (paper §5,
+    as in [62])."""
 
     def __init__(self, num_classes, hidden=128, num_landmarks=68, inputs="motion"):
         super().__init__()
@@ -46,7 +50,9 @@ class LSTMClassifier(nn.Module):
         """Set the input offset and scale from training sequences (B, F, 68, 3)."""
         self.offset.zero_()
         self.scale.fill_(1.0)
-        z = self._prepare(torch.as_tensor(x, dtype=self.offset.dtype, device=self.offset.device))
+        z = self._prepare(
+            torch.as_tensor(x, dtype=self.offset.dtype, device=self.offset.device)
+        )
         self.offset.copy_(z.mean(dim=(0, 1)))
         self.scale.fill_(float((z - self.offset).std()))
 
@@ -61,11 +67,16 @@ class LSTMClassifier(nn.Module):
 
     @torch.no_grad()
     def predict(self, x, batch_size=256):
-        """Predicted classes (n,) (numpy) for sequences given as a numpy array or tensor (n, F, 68, 3)."""
+        """Predicted classes (n,) (numpy) for sequences given as a numpy array or tensor
+        (n, F, 68, 3)."""
         self.eval()
-        x = torch.as_tensor(x if isinstance(x, torch.Tensor) else np.asarray(x), dtype=self.offset.dtype,
-                            device=self.offset.device)
-        predicted = [self.forward(x[i:i + batch_size]).argmax(1) for i in range(0, len(x), batch_size)]
+        x = torch.as_tensor(
+            x if isinstance(x, torch.Tensor) else np.asarray(x),
+            dtype=self.offset.dtype,
+            device=self.offset.device,
+        )
+        predicted = [
+            self.forward(x[i : i + batch_size]).argmax(1)
+            for i in range(0, len(x), batch_size)
+        ]
         return torch.cat(predicted).cpu().numpy()
-
-

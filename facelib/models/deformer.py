@@ -1,21 +1,26 @@
-"""Landmark-guided mesh deformation (paper §3.3, Eq. 11, Fig. 1; the mesh-deformation chapter).
+"""Landmark-guided mesh deformation (paper §3.3, Eq. 11, Fig. 1; the mesh-deformation
+chapter).
 
-Given a neutral mesh M (V, 3) of the template topology and one frame's landmark displacement
-Delta L_f = L_f - L (68, 3), predict the per-vertex displacement Delta M_f; M_f = M + Delta M_f.
+Given a neutral mesh M (V, 3) of the template topology and one frame's landmark
+displacement Delta L_f = L_f - L (68, 3), predict the per-vertex displacement Delta M_f;
+M_f = M + Delta M_f.
 
-* Encoder: five spiral layers on M (models/spiral.py), pooling to the next resolution level of
-  the template after each of the first three, giving mesh features F_e (80 vertices x d).
-* Cross-attention (Eq. 11): softmax(FC(Delta L_f) F_e^T / sqrt(d)) F_e, one query per frame: which
-  parts of *this* face matter for *this* motion.  A linear layer maps it to z_id (204 values).
-* z = lambda_theta z_id + Delta L_f, lambda_theta learnable.  Its initial value is not in the paper;
-  we start at 1, since at 0 the encoder receives no gradient (dz/dz_id = lambda_theta) and the
-  network stays S2D (the mesh-deformation chapter, exercise 1).
-* Decoder (S2D's): a linear layer to 80 x d, then five spiral layers with unpooling between
-  levels, giving Delta M_f (V, 3).
+* Encoder: five spiral layers on M (models/spiral.py), pooling to the next resolution
+  level of the template after each of the first three, giving mesh features F_e (80
+  vertices x d).
+* Cross-attention (Eq. 11): softmax(FC(Delta L_f) F_e^T / sqrt(d)) F_e, one query per
+  frame: which parts of *this* face matter for *this* motion.  A linear layer maps it to
+  z_id (204 values).
+* z = lambda_theta z_id + Delta L_f, lambda_theta learnable.  Its initial value is not
+  in the paper; we start at 1, since at 0 the encoder receives no gradient (dz/dz_id =
+  lambda_theta) and the network stays S2D (the mesh-deformation chapter, exercise 1).
+* Decoder (S2D's): a linear layer to 80 x d, then five spiral layers with unpooling
+  between levels, giving Delta M_f (V, 3).
 
-``attention=False`` gives "ours without attention" (F_e averaged over vertices instead of attended);
-``identity=False`` gives S2D (decoder only, z = Delta L_f).
+``attention=False`` gives "ours without attention" (F_e averaged over vertices instead
+of attended); ``identity=False`` gives S2D (decoder only, z = Delta L_f).
 """
+
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
@@ -30,13 +35,16 @@ from . import spiral
 
 @dataclass(frozen=True)
 class DeformerConfig:
-    channels: tuple = (16, 32, 32, 64, 64)  # our choice: the five encoder spiral layers (decoder mirrors them)
+    # our choice: the five encoder spiral layers (decoder mirrors them)
+    channels: tuple = (16, 32, 32, 64, 64)
     spiral_length: int = 9  # SpiralNet++'s default on meshes of this density
     num_landmarks: int = 68
     attention: bool = True
     identity: bool = True
     scale: float = 10.0  # mm per network unit (our choice: displacements are a few mm)
-    identity_init: float = 1.0  # lambda_theta at initialisation (not in the paper; at 0 the encoder gets no gradient)
+    # lambda_theta at initialisation (not in the paper; at 0 the encoder gets no
+    # gradient)
+    identity_init: float = 1.0
 
     def __post_init__(self):
         object.__setattr__(self, "channels", tuple(self.channels))  # JSON gives a list
@@ -54,25 +62,37 @@ class Deformer(nn.Module):
         super().__init__()
         c = self.config = config
         if len(c.channels) != 5:
-            raise ValueError(f"the encoder has five spiral layers: give five channel counts, got {c.channels}")
+            raise ValueError(
+                "the encoder has five spiral layers: give five channel counts, got"
+                f" {c.channels}"
+            )
         levels = _levels_of_layers()
         d = c.channels[-1]
         self.num_coarse = len(tpl.get_template().levels[3].vertex_index)
         if c.identity:  # S2D (identity=False) has no encoder: it reads Delta L only
             ins = (3,) + tuple(c.channels[:-1])
-            self.encoder = nn.ModuleList(spiral.SpiralConv(i, o, spiral.template_spirals(lv, c.spiral_length))
-                                         for i, o, lv in zip(ins, c.channels, levels))
-            self.pools = nn.ModuleList(spiral.Pool(lv) for lv in levels[:3])  # no weights: no state_dict entry
+            self.encoder = nn.ModuleList(
+                spiral.SpiralConv(i, o, spiral.template_spirals(lv, c.spiral_length))
+                for i, o, lv in zip(ins, c.channels, levels)
+            )
+            # no weights: no state_dict entry
+            self.pools = nn.ModuleList(spiral.Pool(lv) for lv in levels[:3])
             if c.attention:
                 self.query = nn.Linear(c.num_landmarks * 3, d)
             self.to_z_id = nn.Linear(d, c.num_landmarks * 3)
-            self.identity_weight = nn.Parameter(torch.tensor(float(c.identity_init)))  # lambda_theta
+            # lambda_theta
+            self.identity_weight = nn.Parameter(torch.tensor(float(c.identity_init)))
         self.from_z = nn.Linear(c.num_landmarks * 3, self.num_coarse * d)
         outs = tuple(reversed(c.channels[:-1])) + (3,)
-        self.decoder = nn.ModuleList(spiral.SpiralConv(i, o, spiral.template_spirals(lv, c.spiral_length))
-                                     for i, o, lv in zip(reversed(c.channels), outs, reversed(levels)))
-        self.register_buffer("template", torch.tensor(tpl.get_template().vertices, dtype=torch.float32),
-                             persistent=False)
+        self.decoder = nn.ModuleList(
+            spiral.SpiralConv(i, o, spiral.template_spirals(lv, c.spiral_length))
+            for i, o, lv in zip(reversed(c.channels), outs, reversed(levels))
+        )
+        self.register_buffer(
+            "template",
+            torch.tensor(tpl.get_template().vertices, dtype=torch.float32),
+            persistent=False,
+        )
 
     def encode(self, neutral):
         """Mesh features F_e (B, 80, d) of neutral meshes (B, V, 3) in mm."""

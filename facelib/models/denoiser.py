@@ -1,28 +1,33 @@
-"""The noise approximator eps_theta(x_t, t) of the paper (§3.1, Fig. 1): a bidirectional transformer.
+"""The noise approximator eps_theta(x_t, t) of the paper (§3.1, Fig. 1): a bidirectional
+transformer.
 
 The tokens are FE(x_t) + PE(1..F) + TE(t), one per frame (models/bit.py); the encoder is
 bidirectional: every frame attends to every other frame, past and future, which is what
-expression filling (the filling chapter) needs.  Padded frames of a batch of mixed lengths are excluded
-with a key padding mask.  A linear layer maps each output token back to 204 numbers, the noise
-estimate of that frame.
+expression filling (the filling chapter) needs.  Padded frames of a batch of mixed
+lengths are excluded with a key padding mask.  A linear layer maps each output token
+back to 204 numbers, the noise estimate of that frame.
 
-One addition of ours, measured in the denoiser chapter: a token is narrower (128) than a frame (204 numbers),
-so a plain transformer cannot even pass the noise through at large t (its loss stalls at the
-fraction of dimensions it cannot represent).  We therefore add the closed-form *Gaussian* noise
-estimate of each frame, E[eps | x_t] for frames drawn from N(0, Sigma) with Sigma the covariance
-of the training frames,
+One addition of ours, measured in the denoiser chapter: a token is narrower (128) than a
+frame (204 numbers), so a plain transformer cannot even pass the noise through at large
+t (its loss stalls at the fraction of dimensions it cannot represent).  We therefore add
+the closed-form *Gaussian* noise estimate of each frame, E[eps | x_t] for frames drawn
+from N(0, Sigma) with Sigma the covariance of the training frames,
 
     eps_gauss(x_t, t) = sqrt(1 - abar_t) (abar_t Sigma + (1 - abar_t) I)^-1 x_t,
 
-and the transformer learns only the residual: eps_theta = eps_gauss + BiT(TE + PE + FE).  Its
-output layer starts at zero, so training starts from the best linear per-frame denoiser.
+and the transformer learns only the residual: eps_theta = eps_gauss + BiT(TE + PE + FE).
+Its output layer starts at zero, so training starts from the best linear per-frame
+denoiser.
 
-What the network outputs (``prediction``, an ablation of the denoiser chapter): the noise eps (the paper's),
-the clean sequence x_0 (MDM) or the velocity v = sqrt(abar_t) eps - sqrt(1 - abar_t) x_0 (Salimans & Ho 2022).
-The residual is added to the Gaussian estimate written as that target, and :meth:`Denoiser.forward` always
-returns the noise estimate it implies (eps = (x_t - sqrt(abar_t) x_0) / sqrt(1 - abar_t) = sqrt(1 - abar_t) x_t +
-sqrt(abar_t) v), so every sampler and guidance of the book runs any of them unchanged.
+What the network outputs (``prediction``, an ablation of the denoiser chapter): the
+noise eps (the paper's), the clean sequence x_0 (MDM) or the velocity v = sqrt(abar_t)
+eps - sqrt(1 - abar_t) x_0 (Salimans & Ho 2022). The residual is added to the Gaussian
+estimate written as that target, and :meth:`Denoiser.forward` always returns the noise
+estimate it implies (eps = (x_t - sqrt(abar_t) x_0) / sqrt(1 - abar_t) = sqrt(1 -
+abar_t) x_t + sqrt(abar_t) v), so every sampler and guidance of the book runs any of
+them unchanged.
 """
+
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
@@ -36,7 +41,8 @@ from .bit import BiT, check_sequence_input
 
 @dataclass(frozen=True)
 class DenoiserConfig:
-    """Sizes of the denoiser (our choice; the paper gives none: see the denoiser chapter for the CPU budget)."""
+    """Sizes of the denoiser (our choice; the paper gives none: see the denoiser chapter
+    for the CPU budget)."""
 
     num_landmarks: int = 68
     width: int = 128
@@ -47,12 +53,15 @@ class DenoiserConfig:
     gaussian_skip: bool = True  # our addition (see the module docstring)
     num_diffusion_steps: int = 2000  # the schedule the skip needs (paper §4)
     schedule: str = "linear"
-    prediction: str = "eps"  # what the network outputs: "eps" (paper), "x0" (MDM) or "v"; forward returns eps
-    num_classes: int = 0  # > 0: label-conditional (classifier-free guidance), a label token before the frames
+    # what the network outputs: "eps" (paper), "x0" (MDM) or "v"; forward returns eps
+    prediction: str = "eps"
+    # > 0: label-conditional (classifier-free guidance), a label token before the frames
+    num_classes: int = 0
 
 
 class Denoiser(BiT):
-    """eps_theta(x_t, t): (B, F, 68, 3) normalised landmarks, (B,) steps -> (B, F, 68, 3) noise."""
+    """eps_theta(x_t, t): (B, F, 68, 3) normalised landmarks, (B,) steps -> (B, F, 68,
+    3) noise."""
 
     def __init__(self, config=DenoiserConfig()):
         c = config
@@ -64,16 +73,24 @@ class Denoiser(BiT):
         if c.gaussian_skip:
             nn.init.zeros_(self.out.weight)
             nn.init.zeros_(self.out.bias)
-        abar = torch.cumprod(1 - torch.as_tensor(named_betas(c.schedule, c.num_diffusion_steps)), 0)
-        self.register_buffer("alphas_bar", torch.cat([torch.ones(1, dtype=abar.dtype), abar]).float())
-        self.register_buffer("prior_basis", torch.eye(features))  # eigenvectors of Sigma (columns)
-        self.register_buffer("prior_variances", torch.ones(features))  # eigenvalues of Sigma
-        if c.num_classes:  # the label's token; index num_classes is "no label" (the unconditional model)
+        abar = torch.cumprod(
+            1 - torch.as_tensor(named_betas(c.schedule, c.num_diffusion_steps)), 0
+        )
+        self.register_buffer(
+            "alphas_bar", torch.cat([torch.ones(1, dtype=abar.dtype), abar]).float()
+        )
+        # eigenvectors of Sigma (columns)
+        self.register_buffer("prior_basis", torch.eye(features))
+        # eigenvalues of Sigma
+        self.register_buffer("prior_variances", torch.ones(features))
+        # the label's token; index num_classes is "no label" (the unconditional model)
+        if c.num_classes:
             self.label_embedding = nn.Embedding(c.num_classes + 1, c.width)
 
     @torch.no_grad()
     def fit_prior(self, frames):
-        """Set Sigma from normalised training frames (N, 68, 3): the Gaussian part of the estimate."""
+        """Set Sigma from normalised training frames (N, 68, 3): the Gaussian part of
+        the estimate."""
         x = torch.as_tensor(frames, dtype=torch.float64).reshape(len(frames), -1)
         cov = torch.cov(x.T)
         variances, basis = torch.linalg.eigh(cov)
@@ -82,10 +99,15 @@ class Denoiser(BiT):
 
     def _abar(self, t, xt):
         """abar_t for time labels t (B,), shaped (B, 1, 1, 1) on x_t's device."""
-        return self.alphas_bar[t.round().long().clamp(0, len(self.alphas_bar) - 1)].to(xt.device).reshape(-1, 1, 1, 1)
+        return (
+            self.alphas_bar[t.round().long().clamp(0, len(self.alphas_bar) - 1)]
+            .to(xt.device)
+            .reshape(-1, 1, 1, 1)
+        )
 
     def to_eps(self, xt, t, output):
-        """The noise estimate that the network's ``output`` (eps, x_0 or v: ``config.prediction``) implies."""
+        """The noise estimate that the network's ``output`` (eps, x_0 or v:
+        ``config.prediction``) implies."""
         abar = self._abar(t, xt)
         if self.config.prediction == "x0":
             return (xt - abar.sqrt() * output) / (1 - abar).sqrt()
@@ -94,7 +116,8 @@ class Denoiser(BiT):
         return output
 
     def from_eps(self, xt, t, eps):
-        """A noise estimate written as the network's target (the inverse of :meth:`to_eps`)."""
+        """A noise estimate written as the network's target (the inverse of
+        :meth:`to_eps`)."""
         abar = self._abar(t, xt)
         x0 = (xt - (1 - abar).sqrt() * eps) / abar.sqrt()
         if self.config.prediction == "x0":

@@ -1,17 +1,20 @@
-"""A learned filling baseline in the spirit of Berson et al. (2020, paper 002): a bidirectional LSTM
-trained with random masks to regenerate the missing frames of an animation.
+"""A learned filling baseline in the spirit of Berson et al. (2020, paper 002): a
+bidirectional LSTM trained with random masks to regenerate the missing frames of an
+animation.
 
-As in their generator: 2 bidirectional LSTM layers of 128 units, dropout 0.3, a dense output
-layer; per frame the input is the masked animation (1 - M) * X, the mask and one N(0, 1) noise
-value.  Their GAN critic is left out (optional in the issue): the model is trained with the
-reconstruction loss of their Eq. 1 alone,
+As in their generator: 2 bidirectional LSTM layers of 128 units, dropout 0.3, a dense
+output layer; per frame the input is the masked animation (1 - M) * X, the mask and one
+N(0, 1) noise value.  Their GAN critic is left out (optional in the issue): the model is
+trained with the reconstruction loss of their Eq. 1 alone,
 
-    L_feat = alpha_gt (1 - M) |G(X_i) - X| + M |G(X_i) - X|,     alpha_gt = 10 (their value),
+    L_feat = alpha_gt (1 - M) |G(X_i) - X| + M |G(X_i) - X|,  alpha_gt = 10 (theirs),
 
-with M = 1 on the missing frames.  Our one change, for the landmark space: the network predicts a
-correction to the mean of the known frames (mean imputation), so the anatomy given by the known
-frames is kept without having to be relearned.  Frames are in the denoiser's normalised space.
+with M = 1 on the missing frames.  Our one change, for the landmark space: the network
+predicts a correction to the mean of the known frames (mean imputation), so the anatomy
+given by the known frames is kept without having to be relearned.  Frames are in the
+denoiser's normalised space.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -35,8 +38,14 @@ class LSTMFiller(nn.Module):
         super().__init__()
         self.config = config
         d = config.num_landmarks * 3
-        self.lstm = nn.LSTM(d + 2, config.hidden, num_layers=config.layers, dropout=config.dropout,
-                            bidirectional=True, batch_first=True)
+        self.lstm = nn.LSTM(
+            d + 2,
+            config.hidden,
+            num_layers=config.layers,
+            dropout=config.dropout,
+            bidirectional=True,
+            batch_first=True,
+        )
         self.out = nn.Linear(2 * config.hidden, d)
 
     def forward(self, x, known, z=None, generator=None):
@@ -70,7 +79,6 @@ def masked_l1(prediction, target, known, alpha_gt=10.0):
     missing ones (each a mean over its frames' coordinates)."""
     err = (prediction - target).abs().flatten(2).mean(2)  # (B, F)
     k = known.to(err.dtype)
-    return (
-        alpha_gt * (err * k).sum() / k.sum().clamp(min=1)
-        + (err * (1 - k)).sum() / (1 - k).sum().clamp(min=1)
-    )
+    return alpha_gt * (err * k).sum() / k.sum().clamp(min=1) + (err * (1 - k)).sum() / (
+        1 - k
+    ).sum().clamp(min=1)

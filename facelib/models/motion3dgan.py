@@ -1,20 +1,25 @@
 """Motion3DGAN-style baseline (papers/motion3dgan-s2d-otberdout2022, §3.2, Eq. 2-7): a
-label-conditioned WGAN-GP that generates the SRVF of a landmark motion on the unit hypersphere.
+label-conditioned WGAN-GP that generates the SRVF of a landmark motion on the unit
+hypersphere.
 
-* Each training motion is turned into its unit-norm SRVF q (facelib/srvf.py, Eq. 2); E2N motions
-  are first reversed in time, so every motion starts near the neutral face, as in that paper.
-* The GAN works in the tangent space at p, the *renormalised* mean SRVF (Eq. 6): the generator
-  G(z, c) outputs a tangent vector (projected orthogonal to p), q_fake = exp_p(G); the critic
-  D(log_p(q), c) is trained with the Wasserstein loss and gradient penalty (Eq. 4-5, lambda = 10);
-  the generator adds alpha_2 L_r, the L1 distance between log_p(q_fake) and log_p(q) of a random
-  real motion of the same class (Eq. 7; the pairing is not specified in the paper).
-* Decoding (Eq. 3, 10): alpha(0) = the neutral landmarks of a training face, eps = the class's
-  mean arc length; a motion is reversed back to E2N with the class's E2N frequency.
+* Each training motion is turned into its unit-norm SRVF q (facelib/srvf.py, Eq. 2); E2N
+  motions are first reversed in time, so every motion starts near the neutral face, as
+  in that paper.
+* The GAN works in the tangent space at p, the *renormalised* mean SRVF (Eq. 6): the
+  generator G(z, c) outputs a tangent vector (projected orthogonal to p), q_fake =
+  exp_p(G); the critic D(log_p(q), c) is trained with the Wasserstein loss and gradient
+  penalty (Eq. 4-5, lambda = 10); the generator adds alpha_2 L_r, the L1 distance
+  between log_p(q_fake) and log_p(q) of a random real motion of the same class (Eq. 7;
+  the pairing is not specified in the paper).
+* Decoding (Eq. 3, 10): alpha(0) = the neutral landmarks of a training face, eps = the
+  class's mean arc length; a motion is reversed back to E2N with the class's E2N
+  frequency.
 
-Architecture (not given in the paper, which points to MotionGAN): 1-D convolutions over time,
-small enough to ship (our choice).  Adam lr 1e-4, alpha_1 = 1, alpha_2 = 10 (paper); n_critic = 5,
-betas (0.5, 0.9) (WGAN-GP defaults).
+Architecture (not given in the paper, which points to MotionGAN): 1-D convolutions over
+time, small enough to ship (our choice).  Adam lr 1e-4, alpha_1 = 1, alpha_2 = 10
+(paper); n_critic = 5, betas (0.5, 0.9) (WGAN-GP defaults).
 """
+
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
@@ -36,7 +41,8 @@ class Motion3DGANConfig:
 
 
 class Generator(nn.Module):
-    """G(z, c): noise + one-hot label -> tangent vector (B, F-1, 204), in units of ``tangent_scale``."""
+    """G(z, c): noise + one-hot label -> tangent vector (B, F-1, 204), in units of
+    ``tangent_scale``."""
 
     def __init__(self, c):
         super().__init__()
@@ -44,12 +50,20 @@ class Generator(nn.Module):
         self.seed_frames = (c.num_frames - 1 + 3) // 4
         self.fc = nn.Linear(c.noise_dim + c.num_classes, c.channels * self.seed_frames)
         self.body = nn.Sequential(
-            nn.LeakyReLU(0.2), nn.Upsample(scale_factor=2), nn.Conv1d(c.channels, c.channels, 5, padding=2),
-            nn.LeakyReLU(0.2), nn.Upsample(size=c.num_frames - 1), nn.Conv1d(c.channels, c.channels, 5, padding=2),
-            nn.LeakyReLU(0.2), nn.Conv1d(c.channels, c.num_landmarks * 3, 5, padding=2))
+            nn.LeakyReLU(0.2),
+            nn.Upsample(scale_factor=2),
+            nn.Conv1d(c.channels, c.channels, 5, padding=2),
+            nn.LeakyReLU(0.2),
+            nn.Upsample(size=c.num_frames - 1),
+            nn.Conv1d(c.channels, c.channels, 5, padding=2),
+            nn.LeakyReLU(0.2),
+            nn.Conv1d(c.channels, c.num_landmarks * 3, 5, padding=2),
+        )
 
     def forward(self, z, onehot):
-        h = self.fc(torch.cat([z, onehot], 1)).reshape(len(z), self.c.channels, self.seed_frames)
+        h = self.fc(torch.cat([z, onehot], 1)).reshape(
+            len(z), self.c.channels, self.seed_frames
+        )
         return self.body(h).transpose(1, 2)
 
 
@@ -59,28 +73,40 @@ class Critic(nn.Module):
     def __init__(self, c):
         super().__init__()
         self.body = nn.Sequential(
-            nn.Conv1d(c.num_landmarks * 3 + c.num_classes, c.channels, 5, stride=2, padding=2), nn.LeakyReLU(0.2),
-            nn.Conv1d(c.channels, c.channels, 5, stride=2, padding=2), nn.LeakyReLU(0.2),
-            nn.Conv1d(c.channels, c.channels, 5, stride=2, padding=2), nn.LeakyReLU(0.2),
-            nn.AdaptiveAvgPool1d(1), nn.Flatten(), nn.Linear(c.channels, 1))
+            nn.Conv1d(
+                c.num_landmarks * 3 + c.num_classes, c.channels, 5, stride=2, padding=2
+            ),
+            nn.LeakyReLU(0.2),
+            nn.Conv1d(c.channels, c.channels, 5, stride=2, padding=2),
+            nn.LeakyReLU(0.2),
+            nn.Conv1d(c.channels, c.channels, 5, stride=2, padding=2),
+            nn.LeakyReLU(0.2),
+            nn.AdaptiveAvgPool1d(1),
+            nn.Flatten(),
+            nn.Linear(c.channels, 1),
+        )
 
     def forward(self, u, onehot):
-        h = torch.cat([u.transpose(1, 2), onehot[:, :, None].expand(-1, -1, u.shape[1])], 1)
+        h = torch.cat(
+            [u.transpose(1, 2), onehot[:, :, None].expand(-1, -1, u.shape[1])], 1
+        )
         return self.body(h)[:, 0]
 
 
 class Motion3DGAN(nn.Module):
-    """The generator with everything needed to decode: p, the tangent scale, per-class arc lengths
-    and E2N frequencies, and the neutral faces of the training subjects."""
+    """The generator with everything needed to decode: p, the tangent scale, per-class
+    arc lengths and E2N frequencies, and the neutral faces of the training subjects."""
 
     def __init__(self, config, num_neutrals=1):
         super().__init__()
         c = self.config = config
         self.generator = Generator(c)
         d = c.num_landmarks * 3
-        self.register_buffer("reference", torch.zeros(c.num_frames - 1, d))  # p, on the sphere
+        # p, on the sphere
+        self.register_buffer("reference", torch.zeros(c.num_frames - 1, d))
         self.register_buffer("tangent_scale", torch.ones(()))
-        self.register_buffer("arc_length", torch.ones(c.num_classes))  # mm, mean per class
+        # mm, mean per class
+        self.register_buffer("arc_length", torch.ones(c.num_classes))
         self.register_buffer("e2n_fraction", torch.zeros(c.num_classes))
         self.register_buffer("neutrals", torch.zeros(num_neutrals, c.num_landmarks, 3))
 
@@ -91,44 +117,60 @@ class Motion3DGAN(nn.Module):
 
     @torch.no_grad()
     def sample(self, labels, seed=0):
-        """Landmark sequences (n, F, 68, 3) in mm, a tensor where the model is, for class indices ``labels`` (n,).
-        The draws are made on the CPU, so that a seed gives the same sequences on every device."""
+        """Landmark sequences (n, F, 68, 3) in mm, a tensor where the model is, for
+        class indices ``labels`` (n,). The draws are made on the CPU, so that a seed
+        gives the same sequences on every device.
+        """
         gen = torch.Generator().manual_seed(seed)
         n, c, device = len(labels), self.config, self.reference.device
         labels = torch.as_tensor(np.asarray(labels), dtype=torch.long, device=device)
         z = torch.randn(n, c.noise_dim, generator=gen).to(self.reference)
         onehot = nn.functional.one_hot(labels, c.num_classes).to(self.reference.dtype)
         q = srvf.exp_map(self.tangent(z, onehot), self.reference)
-        start = self.neutrals[torch.randint(0, len(self.neutrals), (n,), generator=gen).to(device)].flatten(1)
-        motion = srvf.from_srvf(q, start, self.arc_length[labels]).reshape(n, c.num_frames, c.num_landmarks, 3)
+        start = self.neutrals[
+            torch.randint(0, len(self.neutrals), (n,), generator=gen).to(device)
+        ].flatten(1)
+        motion = srvf.from_srvf(q, start, self.arc_length[labels]).reshape(
+            n, c.num_frames, c.num_landmarks, 3
+        )
         reverse = torch.rand(n, generator=gen).to(device) < self.e2n_fraction[labels]
         motion[reverse] = motion[reverse].flip(1)
         return motion
 
     def generate(self, labels, seed=0):
-        """Landmark sequences (n, F, 68, 3) float32 in mm (numpy) for class indices ``labels`` (n,)."""
+        """Landmark sequences (n, F, 68, 3) float32 in mm (numpy) for class indices
+        ``labels`` (n,)."""
         return self.sample(labels, seed).cpu().numpy().astype(np.float32)
 
 
 def smooth_in_time(motion, sigma):
-    """Gaussian smoothing (sigma in frames, edges replicated) of motions (n, F, d) along F."""
+    """Gaussian smoothing (sigma in frames, edges replicated) of motions (n, F, d) along
+    F."""
     if sigma <= 0:
         return motion
     r = max(1, int(3 * sigma))
-    kernel = torch.exp(-0.5 * (torch.arange(-r, r + 1, dtype=motion.dtype, device=motion.device) / sigma) ** 2)
+    kernel = torch.exp(
+        -0.5
+        * (torch.arange(-r, r + 1, dtype=motion.dtype, device=motion.device) / sigma)
+        ** 2
+    )
     x = nn.functional.pad(motion.transpose(1, 2), (r, r), mode="replicate")
     n, d, f = x.shape
-    out = nn.functional.conv1d(x.reshape(n * d, 1, f), (kernel / kernel.sum())[None, None])
+    out = nn.functional.conv1d(
+        x.reshape(n * d, 1, f), (kernel / kernel.sum())[None, None]
+    )
     return out.reshape(n, d, -1).transpose(1, 2)
 
 
 def prepare(train, smoothing=0.0):
-    """Unit SRVFs (n, F-1, 204) of the training motions (E2N reversed), arc lengths (n,) in mm.
+    """Unit SRVFs (n, F-1, 204) of the training motions (E2N reversed), arc lengths (n,)
+    in mm.
 
-    The SRVF differentiates the motion, so capture noise dominates it: on the CoMA-like data the
-    arc length of the raw landmark paths is about 3 times that of the same paths smoothed with
-    sigma = 1 frame.  A generator of smooth SRVFs decoded with the noisy arc lengths would
-    exaggerate every expression; hence ``smoothing`` (the Motion3DGAN paper works on cleaner data).
+    The SRVF differentiates the motion, so capture noise dominates it: on the CoMA-like
+    data the arc length of the raw landmark paths is about 3 times that of the same
+    paths smoothed with sigma = 1 frame.  A generator of smooth SRVFs decoded with the
+    noisy arc lengths would exaggerate every expression; hence ``smoothing`` (the
+    Motion3DGAN paper works on cleaner data).
     """
     motion = torch.as_tensor(train.landmarks).flatten(2).double()
     e2n = torch.as_tensor(train.kinds == train.kind_names.index("E2N"))

@@ -1,22 +1,29 @@
-"""Spiral convolution on the template's fixed topology (SpiralNet++, Gong et al. 2019; paper §3.3).
+"""Spiral convolution on the template's fixed topology (SpiralNet++, Gong et al. 2019;
+paper §3.3).
 
-A mesh convolution needs an order of each vertex's neighbours that is the same for every vertex.
-SpiralNet++ takes a *spiral*: the vertex itself, then its 1-ring, then its 2-ring, ..., each ring
-walked in a fixed rotational direction, cut to a fixed length L.  Because every face of the book
-shares the template's topology, the spirals are computed once, and a whole layer is
+A mesh convolution needs an order of each vertex's neighbours that is the same for every
+vertex. SpiralNet++ takes a *spiral*: the vertex itself, then its 1-ring, then its
+2-ring, ..., each ring walked in a fixed rotational direction, cut to a fixed length L.
+Because every face of the book shares the template's topology, the spirals are computed
+once, and a whole layer is
 
-    gather (B, V, C) -> (B, V, L, C) -> reshape (B, V, L * C) -> one Linear -> (B, V, C_out).
+    gather (B, V, C) -> (B, V, L, C) -> reshape (B, V, L * C) -> one Linear -> (B, V,
+    C_out).
 
-Rings are ordered counter-clockwise by the angle around the vertex in the template's canonical
-(x0, y0) plane, starting from +x; nearer vertices first at equal angle.  Near the border a ring is
-a half-ring, and the spiral simply goes on into the next ring, so every spiral has length L.
+Rings are ordered counter-clockwise by the angle around the vertex in the template's
+canonical (x0, y0) plane, starting from +x; nearer vertices first at equal angle.  Near
+the border a ring is a half-ring, and the spiral simply goes on into the next ring, so
+every spiral has length L.
 
-Pooling between the template's resolution levels (face/template.py: every second grid row and
-column) keeps the coarse level's vertices; unpooling interpolates the fine grid bilinearly.
+Pooling between the template's resolution levels (face/template.py: every second grid
+row and column) keeps the coarse level's vertices; unpooling interpolates the fine grid
+bilinearly.
 
-Cost: a layer moves B x V x L x C numbers in its gather.  When a layer has fewer outputs than
-inputs (the decoder), it projects first and gathers the projections (the same sum, fewer numbers).
+Cost: a layer moves B x V x L x C numbers in its gather.  When a layer has fewer outputs
+than inputs (the decoder), it projects first and gathers the projections (the same sum,
+fewer numbers).
 """
+
 from __future__ import annotations
 
 from functools import lru_cache
@@ -39,8 +46,9 @@ def neighbours(faces, num_vertices):
 
 
 def spiral_indices(faces, positions, length):
-    """Spirals (V, length) int64 of a mesh: vertex, 1-ring, 2-ring, ... counter-clockwise in the
-    (x, y) plane of ``positions`` (V, >= 2), cut to ``length``."""
+    """Spirals (V, length) int64 of a mesh: vertex, 1-ring, 2-ring, ...
+    counter-clockwise in the (x, y) plane of ``positions`` (V, >= 2), cut to
+    ``length``."""
     positions = np.asarray(positions, dtype=np.float64)[:, :2]
     v_count = len(positions)
     if length < 1:
@@ -52,10 +60,16 @@ def spiral_indices(faces, positions, length):
         while len(spiral) < length:
             nxt = sorted({u for w in ring for u in ring_of[w]} - seen)
             if not nxt:
-                raise ValueError(f"vertex {v} reaches only {len(spiral)} vertices, fewer than the spiral length {length}")
+                raise ValueError(
+                    f"vertex {v} reaches only {len(spiral)} vertices, fewer than the"
+                    f" spiral length {length}"
+                )
             d = positions[nxt] - positions[v]
             angle = np.mod(np.arctan2(d[:, 1], d[:, 0]), 2 * np.pi)
-            ring = [nxt[i] for i in np.lexsort((np.hypot(d[:, 0], d[:, 1]), np.round(angle, 9)))]
+            ring = [
+                nxt[i]
+                for i in np.lexsort((np.hypot(d[:, 0], d[:, 1]), np.round(angle, 9)))
+            ]
             spiral += ring
             seen |= set(ring)
         out[v] = spiral[:length]
@@ -110,21 +124,26 @@ class SpiralConv(nn.Module):
 
 @lru_cache(maxsize=None)
 def pool_index(level):
-    """Positions (V_{level+1},) of the coarser level's vertices among level ``level``'s vertices."""
+    """Positions (V_{level+1},) of the coarser level's vertices among level ``level``'s
+    vertices."""
     levels = tpl.get_template().levels
     where = {int(v): i for i, v in enumerate(levels[level].vertex_index)}
-    return np.array([where[int(v)] for v in levels[level + 1].vertex_index], dtype=np.int64)
+    return np.array(
+        [where[int(v)] for v in levels[level + 1].vertex_index], dtype=np.int64
+    )
 
 
 def pool(x, level):
-    """(B, V_level, C) -> (B, V_{level+1}, C): keep the coarser grid's vertices.  (A network pools with
-    :class:`Pool`, whose index is a buffer that moves with it; this copies the index to x's device.)"""
+    """(B, V_level, C) -> (B, V_{level+1}, C): keep the coarser grid's vertices.  (A
+    network pools with :class:`Pool`, whose index is a buffer that moves with it; this
+    copies the index to x's device.)
+    """
     return torch.index_select(x, 1, torch.as_tensor(pool_index(level), device=x.device))
 
 
 class Pool(nn.Module):
-    """:func:`pool` as a module: the index of the kept vertices is a (non-persistent) buffer, so that
-    ``module.to(device)`` moves it with the network."""
+    """:func:`pool` as a module: the index of the kept vertices is a (non-persistent)
+    buffer, so that ``module.to(device)`` moves it with the network."""
 
     def __init__(self, level):
         super().__init__()
@@ -134,7 +153,10 @@ class Pool(nn.Module):
 
     def forward(self, x):
         if x.shape[1] != self.num_fine:
-            raise ValueError(f"expected {self.num_fine} vertices of level {self.level}, got {x.shape[1]}")
+            raise ValueError(
+                f"expected {self.num_fine} vertices of level {self.level}, got"
+                f" {x.shape[1]}"
+            )
         return torch.index_select(x, 1, self.index)
 
     def extra_repr(self):
@@ -142,14 +164,20 @@ class Pool(nn.Module):
 
 
 def unpool(x, level):
-    """(B, V_{level+1}, C) -> (B, V_level, C): bilinear interpolation on the grid.  The coarse grid
-    (r, c) sits at the fine grid's (2r, 2c), so this is ``interpolate(..., align_corners=True)`` to
-    size (2R - 1, 2C - 1): even rows/columns copy a coarse vertex, odd ones average two or four
-    (30 x faster on the CPU than gathering the four neighbours)."""
+    """(B, V_{level+1}, C) -> (B, V_level, C): bilinear interpolation on the grid.  The
+    coarse grid (r, c) sits at the fine grid's (2r, 2c), so this is ``interpolate(...,
+    align_corners=True)`` to size (2R - 1, 2C - 1): even rows/columns copy a coarse
+    vertex, odd ones average two or four (30 x faster on the CPU than gathering the four
+    neighbours)."""
     levels = tpl.get_template().levels
     b, v, c = x.shape
     if v != len(levels[level + 1].vertex_index):
-        raise ValueError(f"expected {len(levels[level + 1].vertex_index)} vertices of level {level + 1}, got {v}")
+        raise ValueError(
+            f"expected {len(levels[level + 1].vertex_index)} vertices of level"
+            f" {level + 1}, got {v}"
+        )
     grid = x.transpose(1, 2).reshape(b, c, *levels[level + 1].shape)
-    fine = nn.functional.interpolate(grid, size=levels[level].shape, mode="bilinear", align_corners=True)
+    fine = nn.functional.interpolate(
+        grid, size=levels[level].shape, mode="bilinear", align_corners=True
+    )
     return fine.reshape(b, c, -1).transpose(1, 2)

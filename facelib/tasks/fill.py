@@ -1,4 +1,6 @@
-"""Expression filling (§3.2, Alg. 3): the unknown frames of a sequence generated around the known ones."""
+"""Expression filling (§3.2, Alg. 3): the unknown frames of a sequence generated around
+the known ones."""
+
 from __future__ import annotations
 
 import torch
@@ -12,8 +14,8 @@ from .loading import load_denoiser
 
 
 def known_noise(seed):
-    """The generator of the known frames' noise: its own stream, so adding known frames never changes the
-    noise that drives the unknown ones."""
+    """The generator of the known frames' noise: its own stream, so adding known frames
+    never changes the noise that drives the unknown ones."""
     return torch.Generator().manual_seed(10_000 + seed)
 
 

@@ -1,12 +1,14 @@
-"""Landmark keyframes (not in the paper; the fine-control chapter): "put the left mouth corner 8 mm higher at
-frame 25", and a natural sequence around it.  OmniControl and GMD control chosen body joints at chosen frames;
-this is the same for the 68 facial landmarks.
+"""Landmark keyframes (not in the paper; the fine-control chapter): "put the left mouth
+corner 8 mm higher at frame 25", and a natural sequence around it.  OmniControl and GMD
+control chosen body joints at chosen frames; this is the same for the 68 facial
+landmarks.
 
-A keyframe constrains one landmark at one frame, to an absolute ``position`` (mm) or to a ``displacement``
-(mm) from the given neutral face.  With a neutral face the sequence starts from it (frame 0 known, as
-geometry-adaptive generation's N2E order).  The constrained coordinates are conditioned on like the known
-frames of expression filling (Alg. 3 on coordinates instead of frames, "replace"), by reconstruction
-guidance on them ("reconstruction"), or both.
+A keyframe constrains one landmark at one frame, to an absolute ``position`` (mm) or to
+a ``displacement`` (mm) from the given neutral face.  With a neutral face the sequence
+starts from it (frame 0 known, as geometry-adaptive generation's N2E order).  The
+constrained coordinates are conditioned on like the known frames of expression filling
+(Alg. 3 on coordinates instead of frames, "replace"), by reconstruction guidance on them
+("reconstruction"), or both.
 
 The constraints file of ``python -m facelib sample keyframes --constraints keys.json``::
 
@@ -14,6 +16,7 @@ The constraints file of ``python -m facelib sample keyframes --constraints keys.
      "keys": [{"frame": 25, "landmark": 54, "displacement": [0, 8, 0]},
               {"frame": 10, "landmark": 8, "position": [0.5, -60.2, 12.0]}]}
 """
+
 from __future__ import annotations
 
 import json
@@ -34,56 +37,103 @@ KEY_TARGETS = ("position", "displacement")
 
 
 def check_keys(keys, num_frames=NUM_FRAMES, neutral=None):
-    """The keys (a list of dicts, see the module docstring) as targets (F, 68, 3) in mm and their mask (F, 68);
-    with a neutral face (68, 3), frame 0 is that face and displacements are taken from it.  A clear error for a
-    missing field, a frame or landmark out of range, a key given twice or a displacement without a face."""
+    """The keys (a list of dicts, see the module docstring) as targets (F, 68, 3) in mm
+    and their mask (F, 68); with a neutral face (68, 3), frame 0 is that face and
+    displacements are taken from it.  A clear error for a missing field, a frame or
+    landmark out of range, a key given twice or a displacement without a face.
+    """
     if not isinstance(keys, (list, tuple)) or not keys:
-        raise ValueError(f"keys must be a non-empty list of {{'frame', 'landmark', 'position' or 'displacement'}}, "
-                         f"got {keys!r}")
-    given, mask = np.zeros((num_frames, NUM_LANDMARKS, 3)), np.zeros((num_frames, NUM_LANDMARKS), dtype=bool)
+        raise ValueError(
+            "keys must be a non-empty list of {'frame', 'landmark', 'position' or"
+            f" 'displacement'}}, got {keys!r}"
+        )
+    given, mask = np.zeros((num_frames, NUM_LANDMARKS, 3)), np.zeros(
+        (num_frames, NUM_LANDMARKS), dtype=bool
+    )
     if neutral is not None:
         given[0], mask[0] = neutral, True
     for key in keys:
         targets = [k for k in KEY_TARGETS if isinstance(key, dict) and k in key]
-        if not isinstance(key, dict) or any(k not in key for k in KEY_FIELDS) or len(targets) != 1:
-            raise ValueError(f"a key needs 'frame', 'landmark' and one of 'position' or 'displacement', got {key!r}")
+        if (
+            not isinstance(key, dict)
+            or any(k not in key for k in KEY_FIELDS)
+            or len(targets) != 1
+        ):
+            raise ValueError(
+                "a key needs 'frame', 'landmark' and one of 'position' or"
+                f" 'displacement', got {key!r}"
+            )
         frame, landmark = key["frame"], key["landmark"]
         try:
             value = landmark_array(key[targets[0]], f"key {key!r}: the {targets[0]}")
         except ValueError as e:
             raise ValueError(f"{e}; it must be 3 finite numbers (mm)") from None
-        if isinstance(frame, bool) or not isinstance(frame, int) or not 0 <= frame < num_frames:
-            raise ValueError(f"key {key!r}: the frame must be an integer in 0..{num_frames - 1}")
-        if isinstance(landmark, bool) or not isinstance(landmark, int) or not 0 <= landmark < NUM_LANDMARKS:
-            raise ValueError(f"key {key!r}: the landmark must be an iBUG-68 index in 0..67")
-        if value.shape != (3,) or not np.isfinite(value).all() or np.abs(value).max() > LANDMARK_LIMIT_MM:
-            raise ValueError(f"key {key!r}: the {targets[0]} must be 3 finite numbers (mm, within "
-                             f"+-{LANDMARK_LIMIT_MM:g})")
+        if (
+            isinstance(frame, bool)
+            or not isinstance(frame, int)
+            or not 0 <= frame < num_frames
+        ):
+            raise ValueError(
+                f"key {key!r}: the frame must be an integer in 0..{num_frames - 1}"
+            )
+        if (
+            isinstance(landmark, bool)
+            or not isinstance(landmark, int)
+            or not 0 <= landmark < NUM_LANDMARKS
+        ):
+            raise ValueError(
+                f"key {key!r}: the landmark must be an iBUG-68 index in 0..67"
+            )
+        if (
+            value.shape != (3,)
+            or not np.isfinite(value).all()
+            or np.abs(value).max() > LANDMARK_LIMIT_MM
+        ):
+            raise ValueError(
+                f"key {key!r}: the {targets[0]} must be 3 finite numbers (mm, within "
+                f"+-{LANDMARK_LIMIT_MM:g})"
+            )
         if mask[frame, landmark]:
-            raise ValueError(f"landmark {landmark} at frame {frame} is constrained twice (or is the neutral face)")
+            raise ValueError(
+                f"landmark {landmark} at frame {frame} is constrained twice (or is the"
+                " neutral face)"
+            )
         if targets[0] == "displacement" and neutral is None:
-            raise ValueError(f"key {key!r}: a displacement is taken from the neutral face: give one")
-        given[frame, landmark] = value + (neutral[landmark] if targets[0] == "displacement" else 0.0)
+            raise ValueError(
+                f"key {key!r}: a displacement is taken from the neutral face: give one"
+            )
+        given[frame, landmark] = value + (
+            neutral[landmark] if targets[0] == "displacement" else 0.0
+        )
         mask[frame, landmark] = True
     return given, mask
 
 
 def read_constraints(path):
-    """(keys, neutral (68, 3) or None) from a constraints JSON file (schema in the module docstring)."""
+    """(keys, neutral (68, 3) or None) from a constraints JSON file (schema in the
+    module docstring)."""
     try:
         spec = json.loads(Path(path).read_text(encoding="utf-8"))
     except (json.JSONDecodeError, UnicodeDecodeError) as e:
         raise ValueError(f"{path} is not valid JSON: {e}") from None
     except OSError as e:  # absent, a folder, unreadable
         raise ValueError(f"cannot read the constraints file {path}: {e}") from None
-    if not isinstance(spec, dict) or "keys" not in spec or set(spec) - {"keys", "neutral"}:
-        raise ValueError(f"{path}: expected an object with 'keys' (a list) and optionally 'neutral' (68 x 3)")
+    if (
+        not isinstance(spec, dict)
+        or "keys" not in spec
+        or set(spec) - {"keys", "neutral"}
+    ):
+        raise ValueError(
+            f"{path}: expected an object with 'keys' (a list) and optionally 'neutral'"
+            " (68 x 3)"
+        )
     neutral = spec.get("neutral")
     return spec["keys"], None if neutral is None else check_neutral(neutral)
 
 
 def check_neutral(neutral):
-    """A neutral face's landmarks as a finite (68, 3) array (a clear error otherwise)."""
+    """A neutral face's landmarks as a finite (68, 3) array (a clear error
+    otherwise)."""
     return neutral_faces(neutral)
 
 
@@ -126,48 +176,65 @@ def keyframes(
 
 
 def key_errors(sequences, keys, neutral=None):
-    """Distance (mm) of each keyed landmark from its target, (n, number of keys), for sequences (n, F, 68, 3)."""
+    """Distance (mm) of each keyed landmark from its target, (n, number of keys), for
+    sequences (n, F, 68, 3)."""
     x = np.asarray(sequences, dtype=np.float64)
-    given, mask = check_keys(keys, x.shape[1], None if neutral is None else check_neutral(neutral))
+    given, mask = check_keys(
+        keys, x.shape[1], None if neutral is None else check_neutral(neutral)
+    )
     if neutral is not None:
         mask[0] = False  # the neutral frame is given, not a key
     frames, landmarks = np.nonzero(mask)
     return np.linalg.norm(x[:, frames, landmarks] - given[frames, landmarks], axis=-1)
 
 
-
-
 def key_speeds(sequences, keys):
-    """How fast each keyed landmark moves into and out of its keyed frame, the larger of the two (mm/frame),
-    (n, number of keys): a key met by a jump shows here.  Compare with :func:`real_speed_p95`."""
+    """How fast each keyed landmark moves into and out of its keyed frame, the larger of
+    the two (mm/frame), (n, number of keys): a key met by a jump shows here.  Compare
+    with :func:`real_speed_p95`.
+    """
     x = np.asarray(sequences, dtype=np.float64)
     out = np.zeros((len(x), len(keys)))
     for j, key in enumerate(keys):
         f, l = key["frame"], key["landmark"]
-        steps = [np.linalg.norm(x[:, b, l] - x[:, a, l], axis=-1) for a, b in ((f - 1, f), (f, f + 1))
-                 if 0 <= a and b < x.shape[1]]
+        steps = [
+            np.linalg.norm(x[:, b, l] - x[:, a, l], axis=-1)
+            for a, b in ((f - 1, f), (f, f + 1))
+            if 0 <= a and b < x.shape[1]
+        ]
         out[:, j] = np.max(steps, axis=0)
     return out
 
 
 def real_speed_p95(sequences, landmark):
-    """The 95th percentile of a landmark's frame-to-frame motion (mm/frame) over real sequences (n, F, 68, 3)."""
+    """The 95th percentile of a landmark's frame-to-frame motion (mm/frame) over real
+    sequences (n, F, 68, 3)."""
     x = np.asarray(sequences, dtype=np.float64)[:, :, landmark]
     return float(np.percentile(np.linalg.norm(np.diff(x, axis=1), axis=-1), 95))
 
 
 def keyframe_report(sequences, requests, real, tolerance=KEYFRAME_TOLERANCE):
-    """How well sequences (n, F, 68, 3) meet n requests [(keys, neutral or None)], one sequence each:
-    {"error": the largest key error of each (mm), "speed_ratio": the largest speed into or out of a keyed frame
-    over the 95th percentile of that landmark's speed in ``real`` sequences, "met": error within ``tolerance``
-    and no ratio above 1}, each an array (n,)."""
+    """How well sequences (n, F, 68, 3) meet n requests [(keys, neutral or None)], one
+    sequence each: {"error": the largest key error of each (mm), "speed_ratio": the
+    largest speed into or out of a keyed frame over the 95th percentile of that
+    landmark's speed in ``real`` sequences, "met": error within ``tolerance`` and no
+    ratio above 1}, each an array (n,)."""
     x = np.asarray(sequences, dtype=np.float64)
     if len(x) != len(requests):
-        raise ValueError(f"give one sequence per request ({len(requests)}), got {len(x)}")
-    p95 = {l: real_speed_p95(real, l) for l in {key["landmark"] for keys, _ in requests for key in keys}}
+        raise ValueError(
+            f"give one sequence per request ({len(requests)}), got {len(x)}"
+        )
+    p95 = {
+        l: real_speed_p95(real, l)
+        for l in {key["landmark"] for keys, _ in requests for key in keys}
+    }
     error, ratio = np.zeros(len(x)), np.zeros(len(x))
     for k, (keys, neutral) in enumerate(requests):
         limits = [p95[key["landmark"]] for key in keys]
-        error[k] = key_errors(x[k:k + 1], keys, neutral).max()
-        ratio[k] = (key_speeds(x[k:k + 1], keys)[0] / limits).max()
-    return {"error": error, "speed_ratio": ratio, "met": (error <= tolerance) & (ratio <= 1)}
+        error[k] = key_errors(x[k : k + 1], keys, neutral).max()
+        ratio[k] = (key_speeds(x[k : k + 1], keys)[0] / limits).max()
+    return {
+        "error": error,
+        "speed_ratio": ratio,
+        "met": (error <= tolerance) & (ratio <= 1),
+    }

@@ -1,48 +1,82 @@
-"""Label control (§3.2, Alg. 1): the unconditional DDPM guided by a noisy classifier p_phi(y | x_t, t); or,
-not in the paper, classifier-free guidance of a label-conditional denoiser."""
+"""Label control (§3.2, Alg. 1): the unconditional DDPM guided by a noisy classifier
+p_phi(y | x_t, t); or, not in the paper, classifier-free guidance of a label-conditional
+denoiser."""
+
 from __future__ import annotations
 
 from ..checkpoints import checkpoint_name
 from ..config import NUM_DIFFUSION_STEPS, ADAGRAD_LR, LR_REFERENCE_STEPS, LabelControl
-from ..guidance import ClassifierFree, ClassifierScore, MeanShiftGuidance, OptimisationGuidance
+from ..guidance import (
+    ClassifierFree,
+    ClassifierScore,
+    MeanShiftGuidance,
+    OptimisationGuidance,
+)
 from .loading import guided_chain, load_denoiser, load_guide, task_settings
 
 
-def step_scaled_lr(rate, reference_steps, steps=None, num_steps=NUM_DIFFUSION_STEPS, power=0.5):
-    """An Adagrad rate chosen for a chain of ``reference_steps`` reverse steps, for a chain of ``steps``
-    (None: T = ``num_steps``): scaled by (reference_steps / steps) ** power, so that the guidance moves a
-    sample about as far over the whole chain whatever its length (our choice).
+def step_scaled_lr(
+    rate, reference_steps, steps=None, num_steps=NUM_DIFFUSION_STEPS, power=0.5
+):
+    """An Adagrad rate chosen for a chain of ``reference_steps`` reverse steps, for a
+    chain of ``steps`` (None: T = ``num_steps``): scaled by (reference_steps / steps) **
+    power, so that the guidance moves a sample about as far over the whole chain
+    whatever its length (our choice).
 
-    power 0.5: the guided displacements of successive steps add up like a random walk, as the square
-    root of the number of steps (label control; benchmarks/label_control.py measures it at T = 2000,
-    where the unscaled rate overshoots).  power 1: they add up like a drift, linearly (text control:
-    benchmarks/text_control.py measures that the square root still overshoots at T = 2000)."""
+    power 0.5: the guided displacements of successive steps add up like a random walk,
+    as the square root of the number of steps (label control;
+    benchmarks/label_control.py measures it at T = 2000, where the unscaled rate
+    overshoots).  power 1: they add up like a drift, linearly (text control:
+    benchmarks/text_control.py measures that the square root still overshoots at T =
+    2000).
+    """
     return rate * float((reference_steps / (steps or num_steps)) ** power)
 
 
 def adagrad_lr(dataset, steps=None, num_steps=NUM_DIFFUSION_STEPS):
-    """The default Adagrad rate of label control (Alg. 1) for a chain of ``steps`` reverse steps
-    (None: T): ADAGRAD_LR[dataset], chosen at LR_REFERENCE_STEPS, through :func:`step_scaled_lr`."""
+    """The default Adagrad rate of label control (Alg. 1) for a chain of ``steps``
+    reverse steps (None: T): ADAGRAD_LR[dataset], chosen at LR_REFERENCE_STEPS, through
+    :func:`step_scaled_lr`.
+    """
     if dataset not in ADAGRAD_LR:
-        raise ValueError(f"no default Adagrad learning rate for dataset {dataset!r} (defaults for "
-                         f"{', '.join(ADAGRAD_LR)}): pass lr=")
+        raise ValueError(
+            f"no default Adagrad learning rate for dataset {dataset!r} (defaults for "
+            f"{', '.join(ADAGRAD_LR)}): pass lr="
+        )
     return step_scaled_lr(ADAGRAD_LR[dataset], LR_REFERENCE_STEPS, steps, num_steps)
 
 
-def label_control(label, n=16, settings=LabelControl(), denoiser=None, guide=None, progress=True, callback=None,
-                  **overrides):
-    """Label control (Alg. 1): n sequences (n, F, 68, 3) float32 in mm showing ``label``.
+def label_control(
+    label,
+    n=16,
+    settings=LabelControl(),
+    denoiser=None,
+    guide=None,
+    progress=True,
+    callback=None,
+    **overrides,
+):
+    """Label control (Alg. 1): n sequences (n, F, 68, 3) float32 in mm showing
+    ``label``.
 
-    label: a label name of the dataset (e.g. "high_smile"), or a list of n names (one per sequence).
-    settings: :class:`facelib.config.LabelControl`: the guidance ("classifier": a noisy classifier steers the
-    unconditional denoiser, by Alg. 1's 3 Adagrad steps on lambda log p_theta + log p_phi or by the classic
-    mean shift; "cfg": classifier-free guidance of the label-conditional denoiser), lambda, the rate (None:
-    :func:`adagrad_lr`), the scale, the steps (None: the paper's T = 2000), the sampler; ``overrides`` change
-    single fields."""
+    label: a label name of the dataset (e.g. "high_smile"), or a list of n names (one
+    per sequence). settings: :class:`facelib.config.LabelControl`: the guidance
+    ("classifier": a noisy classifier steers the unconditional denoiser, by Alg. 1's 3
+    Adagrad steps on lambda log p_theta + log p_phi or by the classic mean shift; "cfg":
+    classifier-free guidance of the label-conditional denoiser), lambda, the rate (None:
+    :func:`adagrad_lr`), the scale, the steps (None: the paper's T = 2000), the sampler;
+    ``overrides`` change single fields."""
     settings, shape = task_settings(settings, overrides, n)
     labels = check_labels(label, n)
     denoiser, diffusion, model, hook = label_sampler(labels, settings, denoiser, guide)
-    x = diffusion.sample(model, shape, seed=settings.seed, guide=hook, progress=progress, callback=callback)
+    x = diffusion.sample(
+        model,
+        shape,
+        seed=settings.seed,
+        guide=hook,
+        progress=progress,
+        callback=callback,
+    )
     return denoiser.to_mm(x)
 
 
@@ -50,37 +84,58 @@ def check_labels(label, n):
     """n label names from one name or a list of n names (a clear error otherwise)."""
     labels = [label] * n if isinstance(label, str) else list(label)
     if len(labels) != n or not all(isinstance(y, str) for y in labels):
-        raise ValueError(f"label must be a label name or a list of n={n} label names, got {label!r}")
+        raise ValueError(
+            f"label must be a label name or a list of n={n} label names, got {label!r}"
+        )
     return labels
 
 
 def load_conditional_denoiser(dataset):
-    """denoiser_<dataset>_cfg, the label-conditional denoiser of classifier-free guidance (an error naming the
-    command that trains it when it is missing)."""
+    """denoiser_<dataset>_cfg, the label-conditional denoiser of classifier-free
+    guidance (an error naming the command that trains it when it is missing)."""
     name = checkpoint_name("denoiser", dataset, "cfg")
     try:
         return load_denoiser(name)
     except FileNotFoundError:
-        raise FileNotFoundError(f"classifier-free guidance needs the label-conditional denoiser {name}: train it with "
-                                f"`python -m facelib train denoiser --conditional --dataset {dataset}`") from None
+        raise FileNotFoundError(
+            f"classifier-free guidance needs the label-conditional denoiser {name}:"
+            " train it with `python -m facelib train denoiser --conditional --dataset"
+            f" {dataset}`"
+        ) from None
 
 
 def label_sampler(labels, settings, denoiser=None, guide=None):
-    """What label control samples with: (denoiser, chain, the model the chain runs, the sampler hook).
+    """What label control samples with: (denoiser, chain, the model the chain runs, the
+    sampler hook).
 
-    Classifier guidance: the unconditional denoiser and a hook that climbs log p_phi(y | x_t) (Alg. 1 or the
-    mean shift).  Classifier-free guidance: denoiser_<dataset>_cfg inside :class:`ClassifierFree`, no hook."""
+    Classifier guidance: the unconditional denoiser and a hook that climbs log p_phi(y |
+    x_t) (Alg. 1 or the mean shift).  Classifier-free guidance: denoiser_<dataset>_cfg
+    inside :class:`ClassifierFree`, no hook.
+    """
     if settings.guidance == "cfg":
         denoiser = denoiser or load_conditional_denoiser(settings.dataset)
-        model = ClassifierFree(denoiser.model, denoiser.class_indices(labels), settings.guidance_scale)
-        return denoiser, denoiser.diffusion_with(settings.steps, settings.variance, settings.ddim_eta), model, None
+        model = ClassifierFree(
+            denoiser.model, denoiser.class_indices(labels), settings.guidance_scale
+        )
+        return (
+            denoiser,
+            denoiser.diffusion_with(
+                settings.steps, settings.variance, settings.ddim_eta
+            ),
+            model,
+            None,
+        )
     guide = guide or load_guide(settings.dataset, settings.classifier_type)
     score = ClassifierScore(guide.model, guide.class_indices(labels))
     denoiser, diffusion = guided_chain(guide, denoiser, settings)
     if settings.guidance_method == "adagrad":
         lr = settings.lr
         if lr is None:
-            lr = adagrad_lr(guide.dataset, settings.steps, guide.meta["training"]["num_diffusion_steps"])
+            lr = adagrad_lr(
+                guide.dataset,
+                settings.steps,
+                guide.meta["training"]["num_diffusion_steps"],
+            )
         hook = OptimisationGuidance(score, diffusion, settings.guidance_weight, lr)
     else:
         hook = MeanShiftGuidance(score, diffusion, settings.guidance_scale)

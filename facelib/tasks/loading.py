@@ -1,5 +1,8 @@
-"""Loading what the tasks sample with: a trained denoiser with its normaliser and diffusion, and the
-guidance networks (classifiers of Alg. 1 and 4, the text head of Alg. 2), each checked against its data."""
+"""Loading what the tasks sample with: a trained denoiser with its normaliser and
+diffusion, and the guidance networks (classifiers of Alg. 1 and 4, the text head of Alg.
+2), each checked against its data.
+"""
+
 from __future__ import annotations
 
 import dataclasses
@@ -18,7 +21,12 @@ from ..face.sequences import check_num_frames
 from ..face.aus import AU_NAMES
 from ..models.au_regressor import AURegressor, AURegressorConfig
 from ..models.denoiser import Denoiser, DenoiserConfig
-from ..models.noisy_classifier import NoisyClassifier, NoisyClassifierConfig, NoisyTextHead, TextHeadConfig
+from ..models.noisy_classifier import (
+    NoisyClassifier,
+    NoisyClassifierConfig,
+    NoisyTextHead,
+    TextHeadConfig,
+)
 from ..text import EMBEDDING_DIM, MODEL_NAME
 
 
@@ -36,7 +44,8 @@ class TrainedDenoiser:
         return next(self.model.parameters()).device
 
     def to_model(self, landmarks):
-        """Landmarks in mm (numpy, any leading shape) as a normalised tensor on the model's device."""
+        """Landmarks in mm (numpy, any leading shape) as a normalised tensor on the
+        model's device."""
         return torch.as_tensor(self.normalizer.normalize(landmarks)).to(self.device)
 
     def to_mm(self, x):
@@ -44,56 +53,94 @@ class TrainedDenoiser:
         return self.normalizer.denormalize(x.detach().cpu()).numpy()
 
     def class_indices(self, labels):
-        """The label indices of a label-conditional denoiser (classifier-free guidance) for label names."""
+        """The label indices of a label-conditional denoiser (classifier-free guidance)
+        for label names."""
         names = self.meta.get("class_names")
         if not self.model.config.num_classes or not names:
-            raise ValueError(f"classifier-free guidance needs a label-conditional denoiser (train one with "
-                             f"config.DenoiserTraining(conditional=True): denoiser_<dataset>_cfg); "
-                             f"{self.meta.get('name', 'this checkpoint')} is unconditional")
+            raise ValueError(
+                "classifier-free guidance needs a label-conditional denoiser (train"
+                " one with config.DenoiserTraining(conditional=True):"
+                f" denoiser_<dataset>_cfg); {self.meta.get('name', 'this checkpoint')}"
+                " is unconditional"
+            )
         bad = [y for y in labels if y not in names]
         if bad:
-            raise ValueError(f"unknown label {bad[0]!r} for this denoiser; allowed: {', '.join(names)}")
+            raise ValueError(
+                f"unknown label {bad[0]!r} for this denoiser; allowed:"
+                f" {', '.join(names)}"
+            )
         return [names.index(y) for y in labels]
 
     def diffusion_with(self, steps=None, variance=None, eta=None):
-        """The full T-step diffusion (steps=None) or a respaced one with ``steps`` steps; ``variance`` ("beta",
-        "posterior") replaces the sampler's sigma_t^2 (None: the denoiser's own); ``eta`` samples by DDIM."""
+        """The full T-step diffusion (steps=None) or a respaced one with ``steps``
+        steps; ``variance`` ("beta", "posterior") replaces the sampler's sigma_t^2
+        (None: the denoiser's own); ``eta`` samples by DDIM.
+        """
         diffusion = self.diffusion
         if variance is not None and variance != diffusion.variance:
             diffusion = GaussianDiffusion(diffusion.betas[1:], variance)
-        diffusion = diffusion if steps is None or steps == diffusion.num_steps else diffusion.respace(steps)
+        diffusion = (
+            diffusion
+            if steps is None or steps == diffusion.num_steps
+            else diffusion.respace(steps)
+        )
         return diffusion if eta is None else diffusion.with_eta(eta)
 
 
 def load_denoiser(name="denoiser_coma", variance="beta"):
-    """Load a shipped (or retrained) denoiser checkpoint from data/checkpoints (sha256 checked)."""
-    model, meta = load_checkpoint(name, "denoiser", lambda c: Denoiser(DenoiserConfig(**c)))
+    """Load a shipped (or retrained) denoiser checkpoint from data/checkpoints (sha256
+    checked)."""
+    model, meta = load_checkpoint(
+        name, "denoiser", lambda c: Denoiser(DenoiserConfig(**c))
+    )
     training, c = meta["training"], model.config
-    # the sampler runs the recorded schedule; the network converts its output (c.prediction) to eps on its own
-    recorded = (training["schedule"], training["num_diffusion_steps"], training.get("prediction", "eps"))
+    # the sampler runs the recorded schedule; the network converts its output
+    # (c.prediction) to eps on its own
+    recorded = (
+        training["schedule"],
+        training["num_diffusion_steps"],
+        training.get("prediction", "eps"),
+    )
     if recorded != (c.schedule, c.num_diffusion_steps, c.prediction):
-        raise ValueError(f"checkpoint {name}: its training (schedule, steps, prediction target) {recorded} differs "
-                         f"from its network's {(c.schedule, c.num_diffusion_steps, c.prediction)}: it cannot be "
-                         "sampled correctly; retrain it")
-    diffusion = GaussianDiffusion(named_betas(training["schedule"], training["num_diffusion_steps"]), variance)
-    return TrainedDenoiser(model, LandmarkNormalizer.from_dict(meta["normalizer"]), diffusion, {**meta, "name": name})
+        raise ValueError(
+            f"checkpoint {name}: its training (schedule, steps, prediction target)"
+            f" {recorded} differs from its network's"
+            f" {(c.schedule, c.num_diffusion_steps, c.prediction)}: it cannot be"
+            " sampled correctly; retrain it"
+        )
+    diffusion = GaussianDiffusion(
+        named_betas(training["schedule"], training["num_diffusion_steps"]), variance
+    )
+    return TrainedDenoiser(
+        model,
+        LandmarkNormalizer.from_dict(meta["normalizer"]),
+        diffusion,
+        {**meta, "name": name},
+    )
 
 
-# one call's sequences: 100000 x 40 frames are 3.3 GB (float32) per copy of x_t, and a chain holds several copies;
-# a larger n is a mistake, refused before any memory is asked for
+# one call's sequences: 100000 x 40 frames are 3.3 GB (float32) per copy of x_t, and a
+# chain holds several copies; a larger n is a mistake, refused before any memory is
+# asked for
 MAX_SEQUENCES = 100_000
 
 
 def check_n(n, name="n"):
-    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not 1 <= n <= MAX_SEQUENCES:
-        raise ValueError(f"{name} must be a positive integer (at most {MAX_SEQUENCES}), got {n!r}")
+    if (
+        isinstance(n, bool)
+        or not isinstance(n, (int, np.integer))
+        or not 1 <= n <= MAX_SEQUENCES
+    ):
+        raise ValueError(
+            f"{name} must be a positive integer (at most {MAX_SEQUENCES}), got {n!r}"
+        )
 
 
 @dataclass
 class TrainedGuide:
-    """A guidance network with its dataset, type and class names: the classifier p_phi(y | x_t, t)
-    of Alg. 1 (type "I" or "S") or the text head BiT(x_t, t) of Alg. 2 (type "text"; its class
-    names are the labels whose descriptions it was trained on)."""
+    """A guidance network with its dataset, type and class names: the classifier p_phi(y
+    | x_t, t) of Alg. 1 (type "I" or "S") or the text head BiT(x_t, t) of Alg. 2 (type
+    "text"; its class names are the labels whose descriptions it was trained on)."""
 
     model: NoisyClassifier
     dataset: str
@@ -106,74 +153,138 @@ class TrainedGuide:
         """Class indices of label names (a clear error listing the valid ones)."""
         bad = [y for y in labels if y not in self.class_names]
         if bad:
-            raise ValueError(f"unknown label {bad[0]!r} for dataset {self.dataset!r}; "
-                             f"allowed: {', '.join(self.class_names)}")
+            raise ValueError(
+                f"unknown label {bad[0]!r} for dataset {self.dataset!r}; "
+                f"allowed: {', '.join(self.class_names)}"
+            )
         return [self.class_names.index(y) for y in labels]
 
 
 def load_guide(dataset="coma", classifier_type="I", name=None):
-    """Load the shipped guidance classifier guide_<dataset>_<type> (sha256 and classes checked)."""
+    """Load the shipped guidance classifier guide_<dataset>_<type> (sha256 and classes
+    checked)."""
     data.check_dataset_name(dataset)
     data.check_classifier_type(classifier_type)
     name = name or checkpoint_name("guide", dataset, classifier_type)
-    model, meta = load_checkpoint(name, "guide", lambda c: NoisyClassifier(NoisyClassifierConfig(**c)))
+    model, meta = load_checkpoint(
+        name, "guide", lambda c: NoisyClassifier(NoisyClassifierConfig(**c))
+    )
     names = data.check_class_names(meta["class_names"], dataset, classifier_type, name)
     if meta["training"]["dataset"] != dataset:
-        raise ValueError(f"checkpoint {name} was trained on {meta['training']['dataset']!r}, not {dataset!r}")
-    return TrainedGuide(model, dataset, classifier_type, names, LandmarkNormalizer.from_dict(meta["normalizer"]), meta)
+        raise ValueError(
+            f"checkpoint {name} was trained on {meta['training']['dataset']!r}, not"
+            f" {dataset!r}"
+        )
+    return TrainedGuide(
+        model,
+        dataset,
+        classifier_type,
+        names,
+        LandmarkNormalizer.from_dict(meta["normalizer"]),
+        meta,
+    )
 
 
 def load_text_head(dataset=TEXT_DATASET, name=None):
-    """Load the shipped text head guide_<dataset>_text (sha256, labels and text encoder checked)."""
+    """Load the shipped text head guide_<dataset>_text (sha256, labels and text encoder
+    checked)."""
     data.check_dataset_name(dataset)
     name = name or checkpoint_name("guide", dataset, "text")
-    model, meta = load_checkpoint(name, "text_head", lambda c: NoisyTextHead(TextHeadConfig(**c)))
+    model, meta = load_checkpoint(
+        name, "text_head", lambda c: NoisyTextHead(TextHeadConfig(**c))
+    )
     names = data.check_class_names(meta["class_names"], dataset, "I", name)
     if meta["training"]["dataset"] != dataset:
-        raise ValueError(f"checkpoint {name} was trained on {meta['training']['dataset']!r}, not {dataset!r}")
-    if meta.get("text_encoder") != MODEL_NAME or model.config.embedding_dim != EMBEDDING_DIM:
-        raise ValueError(f"checkpoint {name} was trained with the text encoder {meta.get('text_encoder')!r} "
-                         f"({model.config.embedding_dim}-d), not {MODEL_NAME!r} ({EMBEDDING_DIM}-d)")
-    return TrainedGuide(model, dataset, "text", names, LandmarkNormalizer.from_dict(meta["normalizer"]), meta)
+        raise ValueError(
+            f"checkpoint {name} was trained on {meta['training']['dataset']!r}, not"
+            f" {dataset!r}"
+        )
+    if (
+        meta.get("text_encoder") != MODEL_NAME
+        or model.config.embedding_dim != EMBEDDING_DIM
+    ):
+        raise ValueError(
+            f"checkpoint {name} was trained with the text encoder"
+            f" {meta.get('text_encoder')!r} ({model.config.embedding_dim}-d), not"
+            f" {MODEL_NAME!r} ({EMBEDDING_DIM}-d)"
+        )
+    return TrainedGuide(
+        model,
+        dataset,
+        "text",
+        names,
+        LandmarkNormalizer.from_dict(meta["normalizer"]),
+        meta,
+    )
 
 
 def load_au_regressor(dataset="coma", name=None):
-    """Load the shipped AU regressor au_regressor_<dataset> (R(x_t, t) of AU-curve control; sha256 and its
-    AUs checked), as a guidance network whose "classes" are the world's AU names."""
+    """Load the shipped AU regressor au_regressor_<dataset> (R(x_t, t) of AU-curve
+    control; sha256 and its AUs checked), as a guidance network whose "classes" are the
+    world's AU names."""
     data.check_dataset_name(dataset)
     name = name or checkpoint_name("au_regressor", dataset)
-    model, meta = load_checkpoint(name, "au_regressor", lambda c: AURegressor(AURegressorConfig(**c)))
+    model, meta = load_checkpoint(
+        name, "au_regressor", lambda c: AURegressor(AURegressorConfig(**c))
+    )
     if model.config.num_aus != len(AU_NAMES):
-        raise ValueError(f"checkpoint {name} regresses {model.config.num_aus} AUs; the world has {len(AU_NAMES)}")
+        raise ValueError(
+            f"checkpoint {name} regresses {model.config.num_aus} AUs; the world has"
+            f" {len(AU_NAMES)}"
+        )
     if meta["training"]["dataset"] != dataset:
-        raise ValueError(f"checkpoint {name} was trained on {meta['training']['dataset']!r}, not {dataset!r}")
-    return TrainedGuide(model, dataset, "au", AU_NAMES, LandmarkNormalizer.from_dict(meta["normalizer"]), meta)
+        raise ValueError(
+            f"checkpoint {name} was trained on {meta['training']['dataset']!r}, not"
+            f" {dataset!r}"
+        )
+    return TrainedGuide(
+        model,
+        dataset,
+        "au",
+        AU_NAMES,
+        LandmarkNormalizer.from_dict(meta["normalizer"]),
+        meta,
+    )
 
 
 def check_same_space(denoiser, guide):
-    """The classifier must read x_t in the denoiser's normalised space and on its schedule."""
+    """The classifier must read x_t in the denoiser's normalised space and on its
+    schedule."""
     a, b = denoiser.normalizer, guide.normalizer
-    if abs(a.scale - b.scale) > 1e-6 * a.scale or not np.allclose(a.mean_shape, b.mean_shape, atol=1e-4):
-        raise ValueError(f"guidance classifier ({guide.dataset}) and denoiser ({denoiser.meta['training']['dataset']}) "
-                         "normalise landmarks differently: train them on the same dataset")
+    if abs(a.scale - b.scale) > 1e-6 * a.scale or not np.allclose(
+        a.mean_shape, b.mean_shape, atol=1e-4
+    ):
+        raise ValueError(
+            f"guidance classifier ({guide.dataset}) and denoiser"
+            f" ({denoiser.meta['training']['dataset']}) normalise landmarks"
+            " differently: train them on the same dataset"
+        )
     if guide.meta["training"]["num_diffusion_steps"] != denoiser.diffusion.num_steps:
-        raise ValueError("guidance classifier and denoiser use different diffusion schedules")
+        raise ValueError(
+            "guidance classifier and denoiser use different diffusion schedules"
+        )
 
 
 def guided_chain(guide, denoiser, settings):
-    """The denoiser of the guide's dataset (or the given one, checked to share the guide's space) and its
-    chain for the task's settings (steps, variance, sampler)."""
+    """The denoiser of the guide's dataset (or the given one, checked to share the
+    guide's space) and its chain for the task's settings (steps, variance, sampler)."""
     denoiser = denoiser or load_denoiser(checkpoint_name("denoiser", guide.dataset))
     check_same_space(denoiser, guide)
     guide.model.to(denoiser.device)
-    return denoiser, denoiser.diffusion_with(settings.steps, settings.variance, settings.ddim_eta)
+    return denoiser, denoiser.diffusion_with(
+        settings.steps, settings.variance, settings.ddim_eta
+    )
 
 
 def task_settings(settings, overrides, n):
-    """The settings of a call (its defaults with the overrides given) and its checked shape (n, F, 68, 3)."""
+    """The settings of a call (its defaults with the overrides given) and its checked
+    shape (n, F, 68, 3)."""
     if not dataclasses.is_dataclass(settings) or isinstance(settings, type):
-        raise TypeError(f"settings must be a task's settings (a facelib.config dataclass instance), got "
-                        f"{type(settings).__name__}: {settings!r}; give single fields by keyword, e.g. keep='0:1'")
+        raise TypeError(
+            "settings must be a task's settings (a facelib.config dataclass instance),"
+            f" got {type(settings).__name__}: {settings!r}; give single fields by"
+            " keyword, e.g. keep='0:1'"
+        )
     settings = with_overrides(settings, overrides)
     check_n(n)
     return settings, (n, check_num_frames(settings.num_frames), NUM_LANDMARKS, 3)

@@ -1,25 +1,39 @@
-"""Text control (§3.2, Alg. 2): the unconditional DDPM guided by the text head BiT(x_t, t) and a text
-embedding E(c) of the offline sentence encoder (facelib/text.py)."""
+"""Text control (§3.2, Alg. 2): the unconditional DDPM guided by the text head BiT(x_t,
+t) and a text embedding E(c) of the offline sentence encoder (facelib/text.py)."""
+
 from __future__ import annotations
 
 import numpy as np
 import torch
 
 from .. import data
-from ..config import (NUM_DIFFUSION_STEPS, CONTRASTIVE_GUIDANCE_WEIGHT, CONTRASTIVE_LR, TEXT_GUIDANCE_WEIGHT,
-                      TEXT_LR,
-                      TEXT_LR_REFERENCE_STEPS, TEXT_SCORES, TextControl)
-from ..guidance import (BestOfK, ContrastiveScore, CosineScore, DenoisedCosineScore, OptimisationGuidance,
-                        nearest_wording)
+from ..config import (
+    NUM_DIFFUSION_STEPS,
+    CONTRASTIVE_GUIDANCE_WEIGHT,
+    CONTRASTIVE_LR,
+    TEXT_GUIDANCE_WEIGHT,
+    TEXT_LR,
+    TEXT_LR_REFERENCE_STEPS,
+    TEXT_SCORES,
+    TextControl,
+)
+from ..guidance import (
+    BestOfK,
+    ContrastiveScore,
+    CosineScore,
+    DenoisedCosineScore,
+    OptimisationGuidance,
+    nearest_wording,
+)
 from ..text import description_embeddings, get_encoder
 from .label import step_scaled_lr
 from .loading import check_n, guided_chain, load_text_head, task_settings
 
 
 def text_lr(steps=None, num_steps=NUM_DIFFUSION_STEPS, score="cosine"):
-    """The default Adagrad rate of text control (Alg. 2) for a chain of ``steps`` reverse steps
-    (None: T): TEXT_LR (CONTRASTIVE_LR for the contrastive score), chosen at TEXT_LR_REFERENCE_STEPS,
-    through :func:`step_scaled_lr` with power 1."""
+    """The default Adagrad rate of text control (Alg. 2) for a chain of ``steps``
+    reverse steps (None: T): TEXT_LR (CONTRASTIVE_LR for the contrastive score), chosen
+    at TEXT_LR_REFERENCE_STEPS, through :func:`step_scaled_lr` with power 1."""
     if score not in TEXT_SCORES:
         raise ValueError(f"score must be one of {TEXT_SCORES}, got {score!r}")
     rate = CONTRASTIVE_LR if score == "contrastive" else TEXT_LR
@@ -27,37 +41,57 @@ def text_lr(steps=None, num_steps=NUM_DIFFUSION_STEPS, score="cosine"):
 
 
 def text_guidance_weight(score="cosine"):
-    """The default lambda of text control for a score: TEXT_GUIDANCE_WEIGHT (cosine; not the paper's 0.01:
-    the cosine's gradient is small, and Adagrad's steps follow the sign of the sum) or
-    CONTRASTIVE_GUIDANCE_WEIGHT (contrastive)."""
+    """The default lambda of text control for a score: TEXT_GUIDANCE_WEIGHT (cosine; not
+    the paper's 0.01: the cosine's gradient is small, and Adagrad's steps follow the
+    sign of the sum) or CONTRASTIVE_GUIDANCE_WEIGHT (contrastive)."""
     if score not in TEXT_SCORES:
         raise ValueError(f"score must be one of {TEXT_SCORES}, got {score!r}")
-    return CONTRASTIVE_GUIDANCE_WEIGHT if score == "contrastive" else TEXT_GUIDANCE_WEIGHT
+    return (
+        CONTRASTIVE_GUIDANCE_WEIGHT if score == "contrastive" else TEXT_GUIDANCE_WEIGHT
+    )
 
 
 def text_list(text, n):
     """n texts from one text or a list of n (each is checked by the encoder)."""
     check_n(n)
-    texts = [text] * n if isinstance(text, str) else list(text) if isinstance(text, (list, tuple)) else None
+    texts = (
+        [text] * n
+        if isinstance(text, str)
+        else list(text) if isinstance(text, (list, tuple)) else None
+    )
     if texts is None or len(texts) != n:
-        raise ValueError(f"text must be a string or a list of n={n} strings, got {text!r}")
+        raise ValueError(
+            f"text must be a string or a list of n={n} strings, got {text!r}"
+        )
     return texts
 
 
 def text_score(settings, head, denoiser, embeddings):
-    """The score that Alg. 2 climbs for text embeddings (n, D) (facelib/guidance/scores.py): the cosine of
-    Eq. 10 on x_t or on the denoiser's x0_hat, or the contrastive score against the training descriptions
-    of the text's nearest wording (or, with ``settings.vocabulary``, every description known)."""
+    """The score that Alg. 2 climbs for text embeddings (n, D)
+    (facelib/guidance/scores.py): the cosine of Eq. 10 on x_t or on the denoiser's
+    x0_hat, or the contrastive score against the training descriptions of the text's
+    nearest wording (or, with ``settings.vocabulary``, every description known).
+    """
     if settings.score == "contrastive":
         train, encoder = data.load_dataset(head.dataset, "train"), get_encoder()
         references = nearest_wording(description_embeddings(train, encoder), embeddings)
-        vocabulary = (description_embeddings(train, encoder, "vocabulary").flatten(0, 1) if settings.vocabulary
-                      else None)
-        return ContrastiveScore(head.model, embeddings, references, head.meta["training"]["temperature"],
-                                vocabulary=vocabulary)
+        vocabulary = (
+            description_embeddings(train, encoder, "vocabulary").flatten(0, 1)
+            if settings.vocabulary
+            else None
+        )
+        return ContrastiveScore(
+            head.model,
+            embeddings,
+            references,
+            head.meta["training"]["temperature"],
+            vocabulary=vocabulary,
+        )
     if settings.head_input == "x_t":
         return CosineScore(head.model, embeddings)
-    return DenoisedCosineScore(head.model, denoiser.model, denoiser.diffusion, embeddings)
+    return DenoisedCosineScore(
+        head.model, denoiser.model, denoiser.diffusion, embeddings
+    )
 
 
 def text_control(

@@ -1,4 +1,5 @@
 """Unconditional generation (§3.1): the reverse chain from x_T ~ N(0, I)."""
+
 from __future__ import annotations
 
 from ..checkpoints import checkpoint_name
@@ -6,13 +7,27 @@ from ..config import Unconditional
 from .loading import load_denoiser, task_settings
 
 
-def unconditional(n, settings=Unconditional(), denoiser=None, progress=True, callback=None, **overrides):
-    """Sample ``n`` landmark sequences (n, F, 68, 3) float32 in mm from the unconditional DDPM.
+def unconditional(
+    n,
+    settings=Unconditional(),
+    denoiser=None,
+    progress=True,
+    callback=None,
+    **overrides,
+):
+    """Sample ``n`` landmark sequences (n, F, 68, 3) float32 in mm from the
+    unconditional DDPM.
 
-    settings: :class:`facelib.config.Unconditional` (steps: None for the paper's T = 2000, or fewer,
-    respaced without retraining); ``overrides`` change single fields, e.g. ``steps=100``."""
+    settings: :class:`facelib.config.Unconditional` (steps: None for the paper's T =
+    2000, or fewer, respaced without retraining); ``overrides`` change single fields,
+    e.g. ``steps=100``.
+    """
     settings, shape = task_settings(settings, overrides, n)
     denoiser = denoiser or load_denoiser(checkpoint_name("denoiser", settings.dataset))
-    diffusion = denoiser.diffusion_with(settings.steps, settings.variance, settings.ddim_eta)
-    x = diffusion.sample(denoiser.model, shape, seed=settings.seed, progress=progress, callback=callback)
+    diffusion = denoiser.diffusion_with(
+        settings.steps, settings.variance, settings.ddim_eta
+    )
+    x = diffusion.sample(
+        denoiser.model, shape, seed=settings.seed, progress=progress, callback=callback
+    )
     return denoiser.to_mm(x)

@@ -1,12 +1,16 @@
-"""Training: one loop (:mod:`facelib.training.loop`) and one recipe per model (:mod:`facelib.training.recipes`).
+"""Training: one loop (:mod:`facelib.training.loop`) and one recipe per model
+(:mod:`facelib.training.recipes`).
 
     model, history = training.fit(training.recipe("denoiser", steps=100))
-    training.train_and_save(training.recipe("guide", dataset="bu", classifier_type="S"))  # train guide --type S ...
-    training.train_all()                                                     # python -m facelib train all
+    # python -m facelib train guide --dataset bu --type S:
+    training.train_and_save(training.recipe("guide", dataset="bu", classifier_type="S"))
+    training.train_all()  # python -m facelib train all
 
-The same loop runs unchanged under ``torchrun --nproc_per_node N -m facelib train NAME`` (distributed
-data parallel; see the loop's docstring).  Every setting's default is in facelib/config.py.
+The same loop runs unchanged under ``torchrun --nproc_per_node N -m facelib train NAME``
+(distributed data parallel; see the loop's docstring).  Every setting's default is in
+facelib/config.py.
 """
+
 from __future__ import annotations
 
 import json
@@ -17,48 +21,95 @@ from pathlib import Path
 from .. import results
 from ..checkpoints import check_world, checkpoint_paths, save_checkpoint
 from .loop import Draws, TrainingLog, fit, is_main_process
-from .recipes import (RECIPES, SETTINGS, ActorRecipe, AURegressorRecipe, DeformationRecipe, DenoiserRecipe, EvaluatorRecipe, GuideRecipe,
-                      LSTMFillerRecipe, Motion3DGANRecipe, MotionClipRecipe, TextHeadRecipe, swap_anatomy,
-                      text_head_loss, training_anatomies)
+from .recipes import (
+    RECIPES,
+    SETTINGS,
+    ActorRecipe,
+    AURegressorRecipe,
+    DeformationRecipe,
+    DenoiserRecipe,
+    EvaluatorRecipe,
+    GuideRecipe,
+    LSTMFillerRecipe,
+    Motion3DGANRecipe,
+    MotionClipRecipe,
+    TextHeadRecipe,
+    swap_anatomy,
+    text_head_loss,
+    training_anatomies,
+)
 from .shipped import SHIPPED
 
-__all__ = ["Draws", "TrainingLog", "fit", "is_main_process", "RECIPES", "SETTINGS", "ActorRecipe", "AURegressorRecipe", "DeformationRecipe",
-           "DenoiserRecipe", "EvaluatorRecipe", "GuideRecipe", "LSTMFillerRecipe", "Motion3DGANRecipe",
-           "MotionClipRecipe", "TextHeadRecipe", "swap_anatomy", "text_head_loss", "training_anatomies", "SHIPPED",
-           "recipe", "settings_for", "save_trained", "train_and_save", "train_all"]
+__all__ = [
+    "Draws",
+    "TrainingLog",
+    "fit",
+    "is_main_process",
+    "RECIPES",
+    "SETTINGS",
+    "ActorRecipe",
+    "AURegressorRecipe",
+    "DeformationRecipe",
+    "DenoiserRecipe",
+    "EvaluatorRecipe",
+    "GuideRecipe",
+    "LSTMFillerRecipe",
+    "Motion3DGANRecipe",
+    "MotionClipRecipe",
+    "TextHeadRecipe",
+    "swap_anatomy",
+    "text_head_loss",
+    "training_anatomies",
+    "SHIPPED",
+    "recipe",
+    "settings_for",
+    "save_trained",
+    "train_and_save",
+    "train_all",
+]
 
 
 def recipe(model_name, fast=False, **settings):
-    """The recipe of a model by name (``RECIPES``) with its default settings changed by ``settings``
-    (:func:`settings_for`)."""
+    """The recipe of a model by name (``RECIPES``) with its default settings changed by
+    ``settings`` (:func:`settings_for`)."""
     chosen = settings_for(model_name, fast, **settings)
     return RECIPES[model_name](chosen)
 
 
 def settings_for(model_name, fast=False, **settings):
-    """A model's training settings: its defaults (facelib/config.py) changed by ``settings``.
+    """A model's training settings: its defaults (facelib/config.py) changed by
+    ``settings``.
 
-    ``steps`` keeps the warm-up at most a tenth of the run (``Optimisation.with_steps``); ``fast``: the
-    settings' fast-mode version (a few steps, for tests and FACELIB_FAST chapters)."""
+    ``steps`` keeps the warm-up at most a tenth of the run
+    (``Optimisation.with_steps``); ``fast``: the settings' fast-mode version (a few
+    steps, for tests and FACELIB_FAST chapters)."""
     if model_name not in RECIPES:
         raise ValueError(f"unknown model {model_name!r}; allowed: {', '.join(RECIPES)}")
     defaults = SETTINGS[model_name]()
     allowed = [f.name for f in fields(defaults)]
     unknown = sorted(set(settings) - set(allowed))
     if unknown:
-        raise ValueError(f"{model_name} has no setting {', '.join(unknown)}; its settings: {', '.join(allowed)}")
+        raise ValueError(
+            f"{model_name} has no setting {', '.join(unknown)}; its settings:"
+            f" {', '.join(allowed)}"
+        )
     steps = settings.pop("steps", None)
     chosen = replace(defaults, **settings)
     if steps is not None:
         if chosen.epochs is not None:
-            raise ValueError(f"{model_name} trains for a number of epochs ({chosen.epochs}): set epochs, not steps")
+            raise ValueError(
+                f"{model_name} trains for a number of epochs ({chosen.epochs}): set"
+                " epochs, not steps"
+            )
         chosen = chosen.with_steps(steps)
     return chosen.fast() if fast else chosen
 
 
 def trained_on_this_world(name, model=None, settings=None, fast=False):
-    """True if checkpoint ``name`` exists, was trained on the world this process builds and, when ``model``
-    and ``settings`` are given, with the settings of that recipe (settings_for, ``fast``) that it records."""
+    """True if checkpoint ``name`` exists, was trained on the world this process builds
+    and, when ``model`` and ``settings`` are given, with the settings of that recipe
+    (settings_for, ``fast``) that it records.
+    """
     pt, js = checkpoint_paths(name)
     if not (pt.exists() and js.exists()):
         return False
@@ -71,54 +122,100 @@ def trained_on_this_world(name, model=None, settings=None, fast=False):
         return True
     recorded = meta.get("training", {})
     wanted = asdict(settings_for(model, fast, **settings))
-    return all(recorded[k] == (list(v) if isinstance(v, tuple) else v) for k, v in wanted.items() if k in recorded)
+    return all(
+        recorded[k] == (list(v) if isinstance(v, tuple) else v)
+        for k, v in wanted.items()
+        if k in recorded
+    )
 
 
 def save_trained(recipe, model, history, name=None, **metadata):
-    """Write a trained model's checkpoint (weights + JSON with its config, settings, loss curves and
-    ``metadata``, e.g. the training's wall time)."""
-    return save_checkpoint(name or recipe.checkpoint_name(), model, recipe.kind, recipe.model_config(model),
-                           history=history, **recipe.metadata(model), **metadata)
+    """Write a trained model's checkpoint (weights + JSON with its config, settings,
+    loss curves and ``metadata``, e.g. the training's wall time)."""
+    return save_checkpoint(
+        name or recipe.checkpoint_name(),
+        model,
+        recipe.kind,
+        recipe.model_config(model),
+        history=history,
+        **recipe.metadata(model),
+        **metadata,
+    )
 
 
 def train_and_save(recipe, name=None, progress=True, device=None, resume=False):
-    """Train a recipe (or a model by name with its defaults) and save it; only rank 0 writes.
+    """Train a recipe (or a model by name with its defaults) and save it; only rank 0
+    writes.
 
-    Returns the checkpoint paths (.pt, .json), or None on the other ranks of a distributed run."""
+    Returns the checkpoint paths (.pt, .json), or None on the other ranks of a
+    distributed run.
+    """
     recipe = RECIPES[recipe]() if isinstance(recipe, str) else recipe
     stem = checkpoint_paths(name or recipe.checkpoint_name())[0].with_suffix("")
     resumed = resume and stem.with_suffix(".state.pt").exists()
     t0 = time.perf_counter()
-    model, history = fit(recipe, progress=progress, device=device, resume_from=stem if resume else None)
+    model, history = fit(
+        recipe, progress=progress, device=device, resume_from=stem if resume else None
+    )
     if not is_main_process():
         return None
-    written = save_trained(recipe, model, history, name, wall_time_s=round(time.perf_counter() - t0, 1),
-                           resumed=resumed)
-    stem.with_suffix(".state.pt").unlink(missing_ok=True)  # the run is done: its training state goes
+    written = save_trained(
+        recipe,
+        model,
+        history,
+        name,
+        wall_time_s=round(time.perf_counter() - t0, 1),
+        resumed=resumed,
+    )
+    stem.with_suffix(".state.pt").unlink(
+        missing_ok=True
+    )  # the run is done: its training state goes
     return written
 
 
-def train_all(names=None, fast=False, out_dir=None, progress=True, missing=False, resume=False):
-    """Retrain the shipped checkpoints ``names`` (None: all, in the order of SHIPPED) and write them to
-    data/checkpoints (or ``out_dir``).  ``missing``: skip those that exist and were trained on this
-    process's world with their recipe's current settings; ``resume``: continue each from the training
-    state a stopped run left (recipes that walk epochs, the IC's, start over).  Returns rows
-    [name, model, steps, seconds]; a run into data/checkpoints that trained something rewrites
-    results/train_all.json (:func:`store_training_times`)."""
+def train_all(
+    names=None, fast=False, out_dir=None, progress=True, missing=False, resume=False
+):
+    """Retrain the shipped checkpoints ``names`` (None: all, in the order of SHIPPED)
+    and write them to data/checkpoints (or ``out_dir``).  ``missing``: skip those that
+    exist and were trained on this process's world with their recipe's current settings;
+    ``resume``: continue each from the training state a stopped run left (recipes that
+    walk epochs, the IC's, start over).  Returns rows [name, model, steps, seconds]; a
+    run into data/checkpoints that trained something rewrites results/train_all.json
+    (:func:`store_training_times`)."""
     names = list(SHIPPED) if names is None else list(names)
     unknown = [n for n in names if n not in SHIPPED]
     if unknown:
-        raise ValueError(f"no shipped checkpoint {unknown[0]!r}; the shipped ones: {', '.join(SHIPPED)}")
+        raise ValueError(
+            f"no shipped checkpoint {unknown[0]!r}; the shipped ones:"
+            f" {', '.join(SHIPPED)}"
+        )
     stems = {name: str(Path(out_dir) / name) if out_dir else name for name in names}
     if missing:
-        names = [name for name in names if not trained_on_this_world(stems[name], *SHIPPED[name], fast)]
+        names = [
+            name
+            for name in names
+            if not trained_on_this_world(stems[name], *SHIPPED[name], fast)
+        ]
     rows = []
     for name in names:
         model, settings = SHIPPED[name]
         r = recipe(model, fast=fast, **settings)
         t0 = time.perf_counter()
-        train_and_save(r, name=stems[name], progress=progress, resume=resume and r.settings.epochs is None)
-        rows.append([name, model, r.settings.epochs or r.settings.steps, time.perf_counter() - t0])
+        train_and_save(
+            r,
+            name=stems[name],
+            progress=progress,
+            resume=resume and r.settings.epochs is None,
+        )
+        rows.append(
+            [
+                name,
+                model,
+                r.settings.epochs or r.settings.steps,
+                time.perf_counter() - t0,
+            ]
+        )
         print(f"{name}: {rows[-1][3]:.0f} s", flush=True)
     if out_dir is None and not fast and rows:
         store_training_times()
@@ -126,17 +223,39 @@ def train_all(names=None, fast=False, out_dir=None, progress=True, missing=False
 
 
 def store_training_times():
-    """results/train_all.json: every shipped checkpoint of this world with its steps and the wall time
-    its checkpoint recorded (the last run's, when a stopped run was resumed)."""
+    """results/train_all.json: every shipped checkpoint of this world with its steps and
+    the wall time its checkpoint recorded (the last run's, when a stopped run was
+    resumed)."""
     rows, seeds = [], set()
     for name, (model, _) in SHIPPED.items():
         if trained_on_this_world(name):
             meta = json.loads(checkpoint_paths(name)[1].read_text())
             steps = meta["training"].get("epochs") or meta["training"]["steps"]
             seeds.add(int(meta["training"].get("seed", 0)))
-            rows.append([name, model, steps, meta.get("wall_time_s"), bool(meta.get("resumed", False))])
-    results.save_result("train_all", "Training every shipped checkpoint (python -m facelib train all)",
-                        ["checkpoint", "model", "steps (epochs for the IC)", "seconds", "resumed"], rows,
-                        results.Run(checkpoints=[r[0] for r in rows], seeds=sorted(seeds), n=len(rows), steps=[],
-                                    wall_time_s=sum(r[3] or 0.0 for r in rows), command="python -m facelib train all"),
-                        notes="seconds: the wall time recorded in each checkpoint (None: trained before it was recorded)")
+            rows.append(
+                [
+                    name,
+                    model,
+                    steps,
+                    meta.get("wall_time_s"),
+                    bool(meta.get("resumed", False)),
+                ]
+            )
+    results.save_result(
+        "train_all",
+        "Training every shipped checkpoint (python -m facelib train all)",
+        ["checkpoint", "model", "steps (epochs for the IC)", "seconds", "resumed"],
+        rows,
+        results.Run(
+            checkpoints=[r[0] for r in rows],
+            seeds=sorted(seeds),
+            n=len(rows),
+            steps=[],
+            wall_time_s=sum(r[3] or 0.0 for r in rows),
+            command="python -m facelib train all",
+        ),
+        notes=(
+            "seconds: the wall time recorded in each checkpoint (None: trained before"
+            " it was recorded)"
+        ),
+    )

@@ -1,12 +1,16 @@
-"""One recipe per trained model: its settings (facelib/config.py), its data, its model and the loss of a batch.
+"""One recipe per trained model: its settings (facelib/config.py), its data, its model
+and the loss of a batch.
 
-A recipe is what :func:`facelib.training.loop.fit` needs: ``name``, ``settings``, ``size`` (number of
-training examples), ``build(generator)`` (a fresh model, data-dependent buffers fitted),
-``objectives(model)`` (the losses to optimise and the modules they train, all of which a training state
-saves; one, except for the GAN), ``model_config(model)`` and ``metadata(model)`` (what its checkpoint
-records besides the weights).  Every random draw of a loss goes through the step's
-:class:`~facelib.training.loop.Draws`, so that distributed training sees the draws of one process.
+A recipe is what :func:`facelib.training.loop.fit` needs: ``name``, ``settings``,
+``size`` (number of training examples), ``build(generator)`` (a fresh model,
+data-dependent buffers fitted), ``objectives(model)`` (the losses to optimise and the
+modules they train, all of which a training state saves; one, except for the GAN),
+``model_config(model)`` and ``metadata(model)`` (what its checkpoint records besides the
+weights).  Every random draw of a loss goes through the step's
+:class:`~facelib.training.loop.Draws`, so that distributed training sees the draws of
+one process.
 """
+
 from __future__ import annotations
 
 from dataclasses import asdict
@@ -25,29 +29,41 @@ from ..models.au_regressor import AURegressor, AURegressorConfig
 from ..models.classifier import LSTMClassifier
 from ..models.denoiser import Denoiser, DenoiserConfig
 from ..models.deformer import deformation_loss
-from ..models.noisy_classifier import NoisyClassifier, NoisyClassifierConfig, NoisyTextHead, TextHeadConfig
+from ..models.noisy_classifier import (
+    NoisyClassifier,
+    NoisyClassifierConfig,
+    NoisyTextHead,
+    TextHeadConfig,
+)
 from ..text import MODEL_NAME, description_embeddings, get_encoder
 from .loop import Draws, Objective
 
 
 class Recipe:
-    """The parts every recipe shares: one objective, the model's own loss, metadata from the settings."""
+    """The parts every recipe shares: one objective, the model's own loss, metadata from
+    the settings."""
 
     name = "model"
     kind = "model"  # the checkpoint kind
-    distributed = True  # False: its draws are not per example, so it trains on one process only
+    # False: its draws are not per example, so it trains on one process only
+    distributed = True
     device = torch.device("cpu")  # the training device (Recipe.to)
 
     def objectives(self, model):
         return [Objective(model, lambda draws: self.loss(model, draws))]
 
     def to(self, device):
-        """Move the recipe's data (tensors, lists of tensors) and helper networks to the training device."""
+        """Move the recipe's data (tensors, lists of tensors) and helper networks to the
+        training device."""
         self.device = device
         for name, value in list(vars(self).items()):
             if isinstance(value, (torch.Tensor, nn.Module)):
                 setattr(self, name, value.to(device))
-            elif isinstance(value, list) and value and all(isinstance(v, torch.Tensor) for v in value):
+            elif (
+                isinstance(value, list)
+                and value
+                and all(isinstance(v, torch.Tensor) for v in value)
+            ):
                 setattr(self, name, [v.to(device) for v in value])
         return self
 
@@ -61,18 +77,24 @@ class Recipe:
         return f"{self.kind}_{self.settings.dataset}"
 
 
-# ------------------------------------------------------------------------------------------------ the DDPM
+# --------------------------------------------------------------------------- the DDPM
 def training_anatomies(datasets):
-    """Neutral landmarks (K, 68, 3) in mm of every training subject of the given datasets."""
-    return np.concatenate([data.load_dataset(name, "train").subject_neutrals() for name in datasets])
+    """Neutral landmarks (K, 68, 3) in mm of every training subject of the given
+    datasets."""
+    return np.concatenate(
+        [data.load_dataset(name, "train").subject_neutrals() for name in datasets]
+    )
 
 
 def swap_anatomy(x, own, pool, swap, draws):
-    """Anatomy augmentation (our addition): x (B, F, 68, 3) minus each sequence's own neutral frame ``own``
-    (B, 68, 3), plus a random neutral frame of ``pool`` (K, 68, 3), with probability ``swap``.
+    """Anatomy augmentation (our addition): x (B, F, 68, 3) minus each sequence's own
+    neutral frame ``own`` (B, 68, 3), plus a random neutral frame of ``pool`` (K, 68,
+    3), with probability ``swap``.
 
-    CoMA-like data has only 9 training faces, so a DDPM trained on it alone can only draw those 9
-    anatomies; the motion is kept, the anatomy is new.  Only training splits enter the pool."""
+    CoMA-like data has only 9 training faces, so a DDPM trained on it alone can only
+    draw those 9 anatomies; the motion is kept, the anatomy is new.  Only training
+    splits enter the pool.
+    """
     other = pool[draws.randint(0, len(pool))]
     keep = draws.rand() >= swap
     shift = torch.where(keep[:, None, None], torch.zeros_like(own), other - own)
@@ -80,11 +102,14 @@ def swap_anatomy(x, own, pool, swap, draws):
 
 
 def mirror_faces(x, normalizer, probability, draws):
-    """Left-right mirroring (our option): each normalised sequence of x (B, F, 68, 3) is, with ``probability``,
-    replaced by its mirror image (x -> -x in mm, the landmarks renamed by the template's mirror, iBUG-68
-    0 <-> 16, 36 <-> 45, 48 <-> 54, ...).  The world's faces are symmetric up to a mild identity asymmetry, and
-    its one-sided labels (mouth_side, a one-sided smile) go either way, so a mirrored sequence is a plausible one
-    of the same label.  No draw is made at probability 0 (the draws of a run without mirroring are unchanged)."""
+    """Left-right mirroring (our option): each normalised sequence of x (B, F, 68, 3)
+    is, with ``probability``, replaced by its mirror image (x -> -x in mm, the landmarks
+    renamed by the template's mirror, iBUG-68 0 <-> 16, 36 <-> 45, 48 <-> 54, ...).  The
+    world's faces are symmetric up to a mild identity asymmetry, and its one-sided
+    labels (mouth_side, a one-sided smile) go either way, so a mirrored sequence is a
+    plausible one of the same label.  No draw is made at probability 0 (the draws of a
+    run without mirroring are unchanged).
+    """
     if probability == 0:
         return x
     flip = draws.rand() < probability
@@ -94,50 +119,84 @@ def mirror_faces(x, normalizer, probability, draws):
     return torch.where(flip[:, None, None, None], mirrored, x)
 
 
-HELD_OUT_BUCKETS = ((1, 500), (501, 1000), (1001, 1500), (1501, 2000))  # paper steps t, a quarter of T each
-HELD_OUT_SEQUENCES = 256  # at most this many test sequences: a held-out curve costs a few forward passes
+# paper steps t, a quarter of T each
+HELD_OUT_BUCKETS = ((1, 500), (501, 1000), (1001, 1500), (1501, 2000))
+# at most this many test sequences: a held-out curve costs a few forward passes
+HELD_OUT_SEQUENCES = 256
 
 
 class DenoiserRecipe(Recipe):
-    """eps_theta trained with the simple loss of Eq. 8 on anatomy-augmented sequences (or, by its settings,
-    another prediction target, min-SNR-gamma weighting, left-right mirroring)."""
+    """eps_theta trained with the simple loss of Eq. 8 on anatomy-augmented sequences
+    (or, by its settings, another prediction target, min-SNR-gamma weighting, left-right
+    mirroring)."""
 
     kind = "denoiser"
 
     def __init__(self, settings=config.DenoiserTraining(), model_config=None):
         self.settings = settings
-        train = data.load_dataset(settings.dataset, "train", num_frames=settings.num_frames)
-        self.architecture = model_config or DenoiserConfig(num_diffusion_steps=settings.num_diffusion_steps,
-                                                             schedule=settings.schedule, prediction=settings.prediction,
-                                                             num_classes=len(train.label_names) * settings.conditional)
+        train = data.load_dataset(
+            settings.dataset, "train", num_frames=settings.num_frames
+        )
+        self.architecture = model_config or DenoiserConfig(
+            num_diffusion_steps=settings.num_diffusion_steps,
+            schedule=settings.schedule,
+            prediction=settings.prediction,
+            num_classes=len(train.label_names) * settings.conditional,
+        )
         a = self.architecture
-        if (a.num_diffusion_steps, a.schedule, a.prediction) != (settings.num_diffusion_steps, settings.schedule,
-                                                                 settings.prediction):
-            raise ValueError("the denoiser's schedule and prediction target must match the training settings'")
+        if (a.num_diffusion_steps, a.schedule, a.prediction) != (
+            settings.num_diffusion_steps,
+            settings.schedule,
+            settings.prediction,
+        ):
+            raise ValueError(
+                "the denoiser's schedule and prediction target must match the training"
+                " settings'"
+            )
         self.name = f"denoiser ({settings.dataset})"
         self.variable = not isinstance(settings.num_frames, int)
-        self.labels, self.label_names = torch.as_tensor(train.labels), list(train.label_names)
+        self.labels, self.label_names = torch.as_tensor(train.labels), list(
+            train.label_names
+        )
         self.normalizer = data.LandmarkNormalizer.fit(train)
         self.lengths = train.lengths
         x = torch.as_tensor(self.normalizer.normalize(train.landmarks))
-        self.mask_all = torch.arange(x.shape[1])[None, :] < torch.as_tensor(train.lengths)[:, None]
+        self.mask_all = (
+            torch.arange(x.shape[1])[None, :] < torch.as_tensor(train.lengths)[:, None]
+        )
         self.x_all = x * self.mask_all[:, :, None, None]
         self.own = torch.as_tensor(train.sequence_neutrals()) / self.normalizer.scale
-        pool = (training_anatomies(settings.anatomy_pool) if settings.anatomy_swap > 0
-                else np.zeros((1, config.NUM_LANDMARKS, 3)))
+        pool = (
+            training_anatomies(settings.anatomy_pool)
+            if settings.anatomy_swap > 0
+            else np.zeros((1, config.NUM_LANDMARKS, 3))
+        )
         self.pool = (torch.as_tensor(pool) / self.normalizer.scale).float()
         self.size = len(self.x_all)
-        self.diffusion = GaussianDiffusion(named_betas(settings.schedule, settings.num_diffusion_steps))
+        self.diffusion = GaussianDiffusion(
+            named_betas(settings.schedule, settings.num_diffusion_steps)
+        )
         self.held_out = self._held_out_batch(settings)
 
     def _held_out_batch(self, settings):
-        """Fixed draws on the test split for :meth:`validate`: per bucket, each sequence at one step of the
-        bucket (scaled to T) with one noise draw, made once from seed 0 (every run sees the same)."""
-        test = data.load_dataset(settings.dataset, "test", num_frames=settings.num_frames)
+        """Fixed draws on the test split for :meth:`validate`: per bucket, each sequence
+        at one step of the bucket (scaled to T) with one noise draw, made once from seed
+        0 (every run sees the same).
+        """
+        test = data.load_dataset(
+            settings.dataset, "test", num_frames=settings.num_frames
+        )
         g = torch.Generator().manual_seed(0)
-        keep = torch.randperm(len(test), generator=g)[:HELD_OUT_SEQUENCES].sort().values.numpy()
+        keep = (
+            torch.randperm(len(test), generator=g)[:HELD_OUT_SEQUENCES]
+            .sort()
+            .values.numpy()
+        )
         x0 = torch.as_tensor(self.normalizer.normalize(test.landmarks[keep]))
-        mask = torch.arange(x0.shape[1])[None, :] < torch.as_tensor(test.lengths[keep])[:, None]
+        mask = (
+            torch.arange(x0.shape[1])[None, :]
+            < torch.as_tensor(test.lengths[keep])[:, None]
+        )
         x0 = x0 * mask[:, :, None, None]
         scale = settings.num_diffusion_steps / config.NUM_DIFFUSION_STEPS
         buckets = {}
@@ -149,58 +208,108 @@ class DenoiserRecipe(Recipe):
 
     @torch.no_grad()
     def validate(self, model):
-        """Eq. 8's loss ||eps - eps_theta(x_t, t)||^2 on held-out (test) sequences per noise-level bucket, with the
-        same draws at every call: {"t 1-500": loss, ...}.  The eps-loss whatever the prediction target, so that
-        runs with different targets compare (the training loss of an x0 or v run is weighted otherwise)."""
+        """Eq. 8's loss ||eps - eps_theta(x_t, t)||^2 on held-out (test) sequences per
+        noise-level bucket, with the same draws at every call: {"t 1-500": loss, ...}.
+        The eps-loss whatever the prediction target, so that runs with different targets
+        compare (the training loss of an x0 or v run is weighted otherwise).
+        """
         x0, mask, buckets = self.held_out
         was_training = model.training
         model.eval()
         losses = {}
-        for name, (t, eps) in buckets.items():  # a conditional denoiser sees no label (its free estimate)
-            losses[name] = self.diffusion.training_loss(model, x0.to(self.device), t=t, eps=eps.to(self.device),
-                                                        mask=mask.to(self.device) if self.variable else None).item()
+        # a conditional denoiser sees no label (its free estimate)
+        for name, (t, eps) in buckets.items():
+            losses[name] = self.diffusion.training_loss(
+                model,
+                x0.to(self.device),
+                t=t,
+                eps=eps.to(self.device),
+                mask=mask.to(self.device) if self.variable else None,
+            ).item()
         model.train(was_training)
         return losses
 
     def build(self, generator):
         model = Denoiser(self.architecture)
         # the Gaussian prior of the skip connection sees augmented frames too
-        swapped = swap_anatomy(self.x_all, self.own, self.pool, self.settings.anatomy_swap, Draws(generator, self.size))
-        model.fit_prior(torch.cat([seqs[i, :n] for seqs in (self.x_all, swapped) for i, n in enumerate(self.lengths)]))
+        swapped = swap_anatomy(
+            self.x_all,
+            self.own,
+            self.pool,
+            self.settings.anatomy_swap,
+            Draws(generator, self.size),
+        )
+        model.fit_prior(
+            torch.cat(
+                [
+                    seqs[i, :n]
+                    for seqs in (self.x_all, swapped)
+                    for i, n in enumerate(self.lengths)
+                ]
+            )
+        )
         return model
 
     def loss(self, model, draws):
         idx = draws.examples(self.size)
-        x0 = swap_anatomy(self.x_all[idx], self.own[idx], self.pool, self.settings.anatomy_swap, draws)
+        x0 = swap_anatomy(
+            self.x_all[idx], self.own[idx], self.pool, self.settings.anatomy_swap, draws
+        )
         x0 = mirror_faces(x0, self.normalizer, self.settings.mirror, draws)
         x0 = x0 * self.mask_all[idx][:, :, None, None]
         t = draws.randint(1, self.settings.num_diffusion_steps + 1)
         inputs = {}
-        if self.architecture.num_classes:  # classifier-free guidance: drop the label now and then
+        # classifier-free guidance: drop the label now and then
+        if self.architecture.num_classes:
             dropped = draws.rand() < self.settings.condition_dropout
-            inputs["labels"] = torch.where(dropped, self.architecture.num_classes, self.labels[idx])
-        loss = self.diffusion.training_loss(model, x0, t=t, eps=draws.randn(*x0.shape[1:]),
-                                            mask=self.mask_all[idx] if self.variable else None,
-                                            prediction=self.settings.prediction,
-                                            min_snr_gamma=self.settings.min_snr_gamma, **inputs)
+            inputs["labels"] = torch.where(
+                dropped, self.architecture.num_classes, self.labels[idx]
+            )
+        loss = self.diffusion.training_loss(
+            model,
+            x0,
+            t=t,
+            eps=draws.randn(*x0.shape[1:]),
+            mask=self.mask_all[idx] if self.variable else None,
+            prediction=self.settings.prediction,
+            min_snr_gamma=self.settings.min_snr_gamma,
+            **inputs,
+        )
         return loss, {"loss": loss.item()}
 
     def metadata(self, model):
         training = asdict(self.settings) | {"model": asdict(model.config)}
-        training["num_frames"] = self.settings.num_frames if not self.variable else list(self.settings.num_frames)
-        labels = {"class_names": self.label_names} if self.architecture.num_classes else {}
-        return {"training": training, "normalizer": self.normalizer.to_dict(), "torch_version": torch.__version__,
-                "data_dir": str(config.SYNTHETIC_DIR.name), **labels}
+        training["num_frames"] = (
+            self.settings.num_frames
+            if not self.variable
+            else list(self.settings.num_frames)
+        )
+        labels = (
+            {"class_names": self.label_names} if self.architecture.num_classes else {}
+        )
+        return {
+            "training": training,
+            "normalizer": self.normalizer.to_dict(),
+            "torch_version": torch.__version__,
+            "data_dir": str(config.SYNTHETIC_DIR.name),
+            **labels,
+        }
 
     def checkpoint_name(self):
-        variant = "_".join(v for v, on in (("var", self.variable), ("cfg", self.settings.conditional)) if on)
+        variant = "_".join(
+            v
+            for v, on in (("var", self.variable), ("cfg", self.settings.conditional))
+            if on
+        )
         return checkpoint_name("denoiser", self.settings.dataset, variant or None)
 
 
-# --------------------------------------------------------------------------- networks that read noisy x_t
+# --------------------------------------------------------------------------- networks
+# that read noisy x_t
 class _NoisyRecipe(Recipe):
-    """A network trained on x_t = q_sample(x_0, t), t ~ U{0..T} (t = 0 is the clean sequence), in the
-    denoiser's normalised space (the normaliser is fitted on the same split)."""
+    """A network trained on x_t = q_sample(x_0, t), t ~ U{0..T} (t = 0 is the clean
+    sequence), in the denoiser's normalised space (the normaliser is fitted on the same
+    split)."""
 
     def _prepare(self, settings):
         self.settings = settings
@@ -209,18 +318,29 @@ class _NoisyRecipe(Recipe):
         self.normalizer = data.LandmarkNormalizer.fit(self.train)
         self.x_all = torch.as_tensor(self.normalizer.normalize(self.train.landmarks))
         self.size = len(self.x_all)
-        self.diffusion = GaussianDiffusion(named_betas(settings.schedule, settings.num_diffusion_steps))
+        self.diffusion = GaussianDiffusion(
+            named_betas(settings.schedule, settings.num_diffusion_steps)
+        )
 
     def noisy_batch(self, model, draws):
         """(model(x_t, t), indices) for a batch of training sequences."""
         idx = draws.examples(self.size)
         t = draws.randint(0, self.settings.num_diffusion_steps + 1)
         x0 = self.x_all[idx]
-        return model(self.diffusion.q_sample(x0, t, eps=draws.randn(*x0.shape[1:])), t.float()), idx
+        return (
+            model(
+                self.diffusion.q_sample(x0, t, eps=draws.randn(*x0.shape[1:])),
+                t.float(),
+            ),
+            idx,
+        )
 
     def metadata(self, model):
-        return {"training": asdict(self.settings) | {"model": asdict(model.config)},
-                "normalizer": self.normalizer.to_dict(), "torch_version": torch.__version__}
+        return {
+            "training": asdict(self.settings) | {"model": asdict(model.config)},
+            "normalizer": self.normalizer.to_dict(),
+            "torch_version": torch.__version__,
+        }
 
 
 class GuideRecipe(_NoisyRecipe):
@@ -234,7 +354,9 @@ class GuideRecipe(_NoisyRecipe):
         self.name = f"guide ({settings.dataset}, type {settings.classifier_type})"
         self.class_names = list(self.train.class_names(settings.classifier_type))
         self.targets = torch.as_tensor(self.train.targets(settings.classifier_type))
-        self.architecture = model_config or NoisyClassifierConfig(num_classes=len(self.class_names))
+        self.architecture = model_config or NoisyClassifierConfig(
+            num_classes=len(self.class_names)
+        )
 
     def build(self, generator):
         return NoisyClassifier(self.architecture)
@@ -243,18 +365,24 @@ class GuideRecipe(_NoisyRecipe):
         logits, idx = self.noisy_batch(model, draws)
         y = self.targets[idx]
         loss = nn.functional.cross_entropy(logits, y)
-        return loss, {"loss": loss.item(), "accuracy": (logits.argmax(1) == y).float().mean().item()}
+        return loss, {
+            "loss": loss.item(),
+            "accuracy": (logits.argmax(1) == y).float().mean().item(),
+        }
 
     def metadata(self, model):
         return super().metadata(model) | {"class_names": self.class_names}
 
     def checkpoint_name(self):
-        return checkpoint_name("guide", self.settings.dataset, self.settings.classifier_type)
+        return checkpoint_name(
+            "guide", self.settings.dataset, self.settings.classifier_type
+        )
 
 
 class AURegressorRecipe(_NoisyRecipe):
-    """R(x_t, t) of the fine-control chapter: mean squared error of the per-frame AU intensities of noisy
-    sequences against the intensities that made them (``FaceDataset.au_weights``)."""
+    """R(x_t, t) of the fine-control chapter: mean squared error of the per-frame AU
+    intensities of noisy sequences against the intensities that made them
+    (``FaceDataset.au_weights``)."""
 
     kind = "au_regressor"
 
@@ -295,9 +423,11 @@ def text_head_loss(
     # (B, labels, 2, D): the same wording for every class
     candidates = table[:, :, choice].permute(2, 0, 1, 3)
     logits = torch.einsum("bd,blkd->blk", out, candidates) / temperature
-    cosine = 1 - logits[
-        torch.arange(len(out), device=out.device), labels, kinds
-    ].mean() * temperature
+    cosine = (
+        1
+        - logits[torch.arange(len(out), device=out.device), labels, kinds].mean()
+        * temperature
+    )
     # the order is in the words
     enriched = (table[0, 0, choice] != table[0, 1, choice]).any(-1)
     flat = torch.where(
@@ -318,16 +448,21 @@ def text_head_loss(
 
 
 class TextHeadRecipe(_NoisyRecipe):
-    """BiT(x_t, t) of Alg. 2: cos(BiT(x_t, t), E(c)) high for c a random training description of x_0
-    (:func:`text_head_loss`)."""
+    """BiT(x_t, t) of Alg. 2: cos(BiT(x_t, t), E(c)) high for c a random training
+    description of x_0 (:func:`text_head_loss`)."""
 
     kind = "text_head"
 
-    def __init__(self, settings=config.TextHeadTraining(), model_config=None, encoder=None):
+    def __init__(
+        self, settings=config.TextHeadTraining(), model_config=None, encoder=None
+    ):
         self._prepare(settings)
         self.name = f"text head ({settings.dataset})"
         self.table = description_embeddings(self.train, encoder or get_encoder())
-        self.labels, self.kinds = torch.as_tensor(self.train.labels).long(), torch.as_tensor(self.train.kinds).long()
+        self.labels, self.kinds = (
+            torch.as_tensor(self.train.labels).long(),
+            torch.as_tensor(self.train.kinds).long(),
+        )
         self.architecture = model_config or TextHeadConfig()
 
     def build(self, generator):
@@ -336,37 +471,62 @@ class TextHeadRecipe(_NoisyRecipe):
     def loss(self, model, draws):
         output, idx = self.noisy_batch(model, draws)
         choice = draws.randint(0, self.table.shape[2])
-        loss, cosine, hit = text_head_loss(output, self.table, self.labels[idx], self.kinds[idx], choice,
-                                           self.settings.contrastive_weight, self.settings.temperature)
-        return loss, {"loss": loss.item(), "cosine_loss": cosine.item(), "accuracy": hit.item()}
+        loss, cosine, hit = text_head_loss(
+            output,
+            self.table,
+            self.labels[idx],
+            self.kinds[idx],
+            choice,
+            self.settings.contrastive_weight,
+            self.settings.temperature,
+        )
+        return loss, {
+            "loss": loss.item(),
+            "cosine_loss": cosine.item(),
+            "accuracy": hit.item(),
+        }
 
     def metadata(self, model):
-        return super().metadata(model) | {"text_encoder": MODEL_NAME, "class_names": list(self.train.label_names)}
+        return super().metadata(model) | {
+            "text_encoder": MODEL_NAME,
+            "class_names": list(self.train.label_names),
+        }
 
     def checkpoint_name(self):
         return checkpoint_name("guide", self.settings.dataset, "text")
 
 
-# ------------------------------------------------------------------------------------ the evaluation's IC
+# ------------------------------------------------------------------------------------
+# the evaluation's IC
 class EvaluatorRecipe(Recipe):
-    """The independent classifier (IC, §5): an LSTM on clean sequences, cross-entropy, epochs."""
+    """The independent classifier (IC, §5): an LSTM on clean sequences, cross-entropy,
+    epochs."""
 
     kind = "evaluator"
 
     def __init__(self, settings=config.EvaluatorTraining()):
         data.check_classifier_type(settings.classifier_type)
         self.settings = settings
-        self.name = f"IC ({settings.dataset}, type {settings.classifier_type}, {settings.inputs})"
+        self.name = (
+            f"IC ({settings.dataset}, type {settings.classifier_type},"
+            f" {settings.inputs})"
+        )
         train = data.load_dataset(settings.dataset, "train")
         self.class_names = list(train.class_names(settings.classifier_type))
         self.x = torch.as_tensor(train.landmarks, dtype=torch.float32)
-        self.y = torch.as_tensor(train.targets(settings.classifier_type), dtype=torch.long)
+        self.y = torch.as_tensor(
+            train.targets(settings.classifier_type), dtype=torch.long
+        )
         self.size = len(self.x)
 
     def build(self, generator):
         s = self.settings
-        model = LSTMClassifier(len(self.class_names), hidden=s.hidden, num_landmarks=config.NUM_LANDMARKS,
-                               inputs=s.inputs)
+        model = LSTMClassifier(
+            len(self.class_names),
+            hidden=s.hidden,
+            num_landmarks=config.NUM_LANDMARKS,
+            inputs=s.inputs,
+        )
         model.fit_normalization(self.x)
         return model
 
@@ -376,17 +536,23 @@ class EvaluatorRecipe(Recipe):
         return loss, {"loss": loss.item()}
 
     def model_config(self, model):
-        return {"num_classes": len(self.class_names), "hidden": self.settings.hidden,
-                "num_landmarks": config.NUM_LANDMARKS, "inputs": self.settings.inputs}
+        return {
+            "num_classes": len(self.class_names),
+            "hidden": self.settings.hidden,
+            "num_landmarks": config.NUM_LANDMARKS,
+            "inputs": self.settings.inputs,
+        }
 
     def metadata(self, model):
         return super().metadata(model) | {"class_names": self.class_names}
 
     def checkpoint_name(self):
-        return checkpoint_name("ic", self.settings.dataset, self.settings.classifier_type)
+        return checkpoint_name(
+            "ic", self.settings.dataset, self.settings.classifier_type
+        )
 
 
-# -------------------------------------------------------------------------------------------- baselines
+# -------------------------------------------------------------------------- baselines
 class _BaselineRecipe(Recipe):
     def _prepare(self, settings, name):
         data.check_dataset_name(settings.dataset)
@@ -408,8 +574,13 @@ class ActorRecipe(_BaselineRecipe):
         self.size = len(self.delta)
 
     def build(self, generator):
-        model = actor.ActorCVAE(actor.ActorConfig(num_classes=len(self.train.label_names), depth=self.settings.depth,
-                                                  num_neutrals=len(np.unique(self.train.subjects))))
+        model = actor.ActorCVAE(
+            actor.ActorConfig(
+                num_classes=len(self.train.label_names),
+                depth=self.settings.depth,
+                num_neutrals=len(np.unique(self.train.subjects)),
+            )
+        )
         model.scale.fill_(float(self.delta.std()))
         model.neutrals.copy_(torch.as_tensor(self.train.subject_neutrals()))
         self.x_all = self.delta / model.scale
@@ -421,8 +592,11 @@ class ActorRecipe(_BaselineRecipe):
         mu, logvar = model.encode(x, y)
         z = mu + (0.5 * logvar).exp() * draws.randn(mu.shape[1])
         rec = ((model.decode(z, y, x.shape[1]) - x) ** 2).mean()
-        kl = (0.5 * (mu ** 2 + logvar.exp() - 1 - logvar)).sum(1).mean()
-        return rec + self.settings.kl_weight * kl, {"reconstruction": rec.item(), "kl": kl.item()}
+        kl = (0.5 * (mu**2 + logvar.exp() - 1 - logvar)).sum(1).mean()
+        return rec + self.settings.kl_weight * kl, {
+            "reconstruction": rec.item(),
+            "kl": kl.item(),
+        }
 
 
 class MotionClipRecipe(_BaselineRecipe):
@@ -432,11 +606,16 @@ class MotionClipRecipe(_BaselineRecipe):
         self._prepare(settings, "motionclip")
         self.table = description_embeddings(self.train, encoder or get_encoder())
         self.delta = torch.as_tensor(self.train.delta_landmarks())
-        self.labels, self.kinds = torch.as_tensor(self.train.labels).long(), torch.as_tensor(self.train.kinds).long()
+        self.labels, self.kinds = (
+            torch.as_tensor(self.train.labels).long(),
+            torch.as_tensor(self.train.kinds).long(),
+        )
         self.size = len(self.delta)
 
     def build(self, generator):
-        model = motionclip.TextToMotion(motionclip.MotionClipConfig(embedding_dim=self.table.shape[-1]))
+        model = motionclip.TextToMotion(
+            motionclip.MotionClipConfig(embedding_dim=self.table.shape[-1])
+        )
         model.scale.fill_(float(self.delta.std()))
         model.neutral.copy_(torch.as_tensor(self.train.subject_neutrals().mean(0)))
         self.x_all = self.delta / model.scale
@@ -451,9 +630,11 @@ class MotionClipRecipe(_BaselineRecipe):
 
 
 class Motion3DGANRecipe(_BaselineRecipe):
-    """The Motion3DGAN-style WGAN-GP on SRVFs (Eq. 4-7 of Otberdout et al.): a critic and a generator."""
+    """The Motion3DGAN-style WGAN-GP on SRVFs (Eq. 4-7 of Otberdout et al.): a critic
+    and a generator."""
 
-    distributed = False  # the reconstruction partner of each example is drawn within its class
+    # the reconstruction partner of each example is drawn within its class
+    distributed = False
 
     def __init__(self, settings=config.Motion3DGANTraining()):
         self._prepare(settings, "motion3dgan")
@@ -462,17 +643,28 @@ class Motion3DGANRecipe(_BaselineRecipe):
         self.reference = srvf.reference_point(q)
         self.real = srvf.log_map(q, self.reference).float()
         self.labels = torch.as_tensor(self.train.labels)
-        self.by_class = [torch.nonzero(self.labels == y)[:, 0] for y in range(self.num_classes)]
+        self.by_class = [
+            torch.nonzero(self.labels == y)[:, 0] for y in range(self.num_classes)
+        ]
         self.size = len(self.real)
 
     def build(self, generator):
         k, train = self.num_classes, self.train
-        config_ = motion3dgan.Motion3DGANConfig(num_classes=k, num_frames=train.landmarks.shape[1],
-                                                channels=self.settings.channels)
-        model = motion3dgan.Motion3DGAN(config_, num_neutrals=len(np.unique(train.subjects)))
+        config_ = motion3dgan.Motion3DGANConfig(
+            num_classes=k,
+            num_frames=train.landmarks.shape[1],
+            channels=self.settings.channels,
+        )
+        model = motion3dgan.Motion3DGAN(
+            config_, num_neutrals=len(np.unique(train.subjects))
+        )
         model.reference.copy_(self.reference.float())
         model.tangent_scale.fill_(float(self.real.std()))
-        model.arc_length.copy_(torch.stack([self.length[self.labels == y].mean() for y in range(k)]).float())
+        model.arc_length.copy_(
+            torch.stack(
+                [self.length[self.labels == y].mean() for y in range(k)]
+            ).float()
+        )
         e2n = [np.mean(train.kinds[train.labels == y] == 1) for y in range(k)]
         model.e2n_fraction.copy_(torch.as_tensor(e2n).float())
         model.neutrals.copy_(torch.as_tensor(train.subject_neutrals()))
@@ -480,35 +672,61 @@ class Motion3DGANRecipe(_BaselineRecipe):
         return model
 
     def objectives(self, model):
-        return [Objective(self.critic, lambda d: self.critic_loss(model, d), self.settings.critic_steps),
-                Objective(model.generator, lambda d: self.generator_loss(model, d))]
+        return [
+            Objective(
+                self.critic,
+                lambda d: self.critic_loss(model, d),
+                self.settings.critic_steps,
+            ),
+            Objective(model.generator, lambda d: self.generator_loss(model, d)),
+        ]
 
     def _fake(self, model, y, draws):
         z = draws.randn(model.config.noise_dim)
-        return model.tangent(z, nn.functional.one_hot(y, self.num_classes).float()) / model.tangent_scale
+        return (
+            model.tangent(z, nn.functional.one_hot(y, self.num_classes).float())
+            / model.tangent_scale
+        )
 
     def critic_loss(self, model, draws):
         idx = draws.examples(self.size)
-        y, onehot = self.labels[idx], nn.functional.one_hot(self.labels[idx], self.num_classes).float()
+        y, onehot = (
+            self.labels[idx],
+            nn.functional.one_hot(self.labels[idx], self.num_classes).float(),
+        )
         u_real = self.real[idx] / model.tangent_scale
         with torch.no_grad():
             u_fake = self._fake(model, y, draws)
         tau = draws.rand(1, 1)
         u_mix = ((1 - tau) * u_real + tau * u_fake).requires_grad_(True)
-        grad = torch.autograd.grad(self.critic(u_mix, onehot).sum(), u_mix, create_graph=True)[0]
+        grad = torch.autograd.grad(
+            self.critic(u_mix, onehot).sum(), u_mix, create_graph=True
+        )[0]
         penalty = ((grad.flatten(1).norm(dim=1) - 1) ** 2).mean()
-        wasserstein = self.critic(u_fake, onehot).mean() - self.critic(u_real, onehot).mean()
+        wasserstein = (
+            self.critic(u_fake, onehot).mean() - self.critic(u_real, onehot).mean()
+        )
         loss = wasserstein + self.settings.gp_weight * penalty
         return loss, {"critic": loss.item()}
 
     def generator_loss(self, model, draws):
         s, gen = self.settings, draws.generator
         y = self.labels[draws.examples(self.size)]
-        partner = torch.stack([members[torch.randint(0, len(members), (1,), generator=gen)][0]
-                               for members in (self.by_class[int(c)] for c in y)])
+        partner = torch.stack(
+            [
+                members[torch.randint(0, len(members), (1,), generator=gen)][0]
+                for members in (self.by_class[int(c)] for c in y)
+            ]
+        )
         u_fake = self._fake(model, y, draws)
-        loss = (-s.adversarial_weight * self.critic(u_fake, nn.functional.one_hot(y, self.num_classes).float()).mean()
-                + s.reconstruction_weight * (u_fake - self.real[partner] / model.tangent_scale).abs().mean())
+        loss = (
+            -s.adversarial_weight
+            * self.critic(
+                u_fake, nn.functional.one_hot(y, self.num_classes).float()
+            ).mean()
+            + s.reconstruction_weight
+            * (u_fake - self.real[partner] / model.tangent_scale).abs().mean()
+        )
         return loss, {"generator": loss.item()}
 
     def model_config(self, model):
@@ -516,11 +734,16 @@ class Motion3DGANRecipe(_BaselineRecipe):
 
 
 def random_masks(n, num_frames, generator):
-    """Training masks (n, F) bool, True = known: a quarter each of FFB, FFE and FFM layouts (§5.3)
-    and of one missing segment of random position and length (Berson et al.'s random gaps)."""
+    """Training masks (n, F) bool, True = known: a quarter each of FFB, FFE and FFM
+    layouts (§5.3) and of one missing segment of random position and length (Berson et
+    al.'s random gaps).
+    """
     kind = torch.randint(0, 4, (n,), generator=generator)
     seed = int(torch.randint(0, 2**31 - 1, (1,), generator=generator))
-    masks = [torch.as_tensor(fill_masks(s, n, num_frames, seed + i)) for i, s in enumerate(FILL_SETTINGS)]
+    masks = [
+        torch.as_tensor(fill_masks(s, n, num_frames, seed + i))
+        for i, s in enumerate(FILL_SETTINGS)
+    ]
     start = torch.randint(1, num_frames - 2, (n, 1), generator=generator)
     length = torch.randint(2, num_frames // 2, (n, 1), generator=generator)
     f = torch.arange(num_frames)[None]
@@ -529,7 +752,8 @@ def random_masks(n, num_frames, generator):
 
 
 class LSTMFillerRecipe(_BaselineRecipe):
-    """The bidirectional-LSTM filler (Berson et al.): random masks, the masked L1 of their Eq. 1."""
+    """The bidirectional-LSTM filler (Berson et al.): random masks, the masked L1 of
+    their Eq. 1."""
 
     distributed = False  # the filler draws its own noise inside the forward pass
 
@@ -547,29 +771,43 @@ class LSTMFillerRecipe(_BaselineRecipe):
     def loss(self, model, draws):
         x = self.x_all[draws.examples(self.size)]
         known = draws.rows(lambda n, gen: random_masks(n, x.shape[1], gen))
-        loss = lstm_filler.masked_l1(model(x, known, generator=draws.generator), x, known, self.settings.alpha_gt)
+        loss = lstm_filler.masked_l1(
+            model(x, known, generator=draws.generator), x, known, self.settings.alpha_gt
+        )
         return loss, {"loss": loss.item()}
 
     def metadata(self, model):
-        return {"training": asdict(self.settings), "normalizer": self.normalizer.to_dict(),
-                "torch_version": torch.__version__}
+        return {
+            "training": asdict(self.settings),
+            "normalizer": self.normalizer.to_dict(),
+            "torch_version": torch.__version__,
+        }
 
 
-# ------------------------------------------------------------------------------------ mesh deformation
+# ------------------------------------------------------------------------------------
+# mesh deformation
 class DeformationRecipe(Recipe):
-    """A Table 5 network: (neutral mesh, Delta L_f) -> Delta M_f, S2D's landmark-weighted L1."""
+    """A Table 5 network: (neutral mesh, Delta L_f) -> Delta M_f, S2D's
+    landmark-weighted L1."""
 
     kind = "deformer"
 
     def __init__(self, settings=config.DeformationTraining()):
         s = self.settings = settings
-        self.name = f"deformer ({deformation.check_method(s.method)}, {deformation.check_split(s.split)} split)"
+        self.name = (
+            f"deformer ({deformation.check_method(s.method)},"
+            f" {deformation.check_split(s.split)} split)"
+        )
         train, _ = deformation.split_datasets(s.split)
         if s.max_sequences:
-            train = train.subset(np.random.default_rng(s.seed).permutation(len(train))[:s.max_sequences])
+            train = train.subset(
+                np.random.default_rng(s.seed).permutation(len(train))[: s.max_sequences]
+            )
         pairs = deformation.make_pairs(train, s.frames_per_sequence, seed=s.seed)
-        self.neutral, self.dl, self.dm = (torch.as_tensor(a) for a in (pairs.neutral, pairs.delta_landmarks,
-                                                                       pairs.delta_mesh))
+        self.neutral, self.dl, self.dm = (
+            torch.as_tensor(a)
+            for a in (pairs.neutral, pairs.delta_landmarks, pairs.delta_mesh)
+        )
         self.weights = deformation.loss_weights()
         self.size = len(pairs)
 
@@ -579,31 +817,60 @@ class DeformationRecipe(Recipe):
     def loss(self, model, draws):
         seq = draws.examples(self.size)
         k = self.dm.shape[1]
-        frame = draws.rows(lambda n, gen: torch.stack([torch.randperm(k, generator=gen)[:self.settings.frames_per_batch]
-                                                       for _ in range(n)]))
+        frame = draws.rows(
+            lambda n, gen: torch.stack(
+                [
+                    torch.randperm(k, generator=gen)[: self.settings.frames_per_batch]
+                    for _ in range(n)
+                ]
+            )
+        )
         target = self.dm[seq[:, None], frame]
         predicted = model(self.neutral[seq], self.dl[seq[:, None], frame])
         loss = deformation_loss(predicted, target, self.weights)
-        return loss, {"loss": loss.item(), "error_mm": (predicted - target).norm(dim=-1).mean().item()}
+        return loss, {
+            "loss": loss.item(),
+            "error_mm": (predicted - target).norm(dim=-1).mean().item(),
+        }
 
     def model_config(self, model):
         return deformation.METHODS[self.settings.method][0].config_dict(model)
 
     def metadata(self, model):
-        return {"method": self.settings.method, "split": self.settings.split,
-                "held_out_expressions": list(deformation.HELD_OUT_EXPRESSIONS)} | super().metadata(model)
+        return {
+            "method": self.settings.method,
+            "split": self.settings.split,
+            "held_out_expressions": list(deformation.HELD_OUT_EXPRESSIONS),
+        } | super().metadata(model)
 
     def checkpoint_name(self):
         # Table 5 over seeds (training.SHIPPED): seed 0 unnamed
-        return checkpoint_name("deform", self.settings.method, self.settings.split, self.settings.seed)
+        return checkpoint_name(
+            "deform", self.settings.method, self.settings.split, self.settings.seed
+        )
 
 
-RECIPES = {"denoiser": DenoiserRecipe, "guide": GuideRecipe, "text_head": TextHeadRecipe,
-           "evaluator": EvaluatorRecipe, "actor": ActorRecipe, "motionclip": MotionClipRecipe,
-           "motion3dgan": Motion3DGANRecipe, "lstm_filler": LSTMFillerRecipe, "deformer": DeformationRecipe,
-           "au_regressor": AURegressorRecipe}
-SETTINGS = {"denoiser": config.DenoiserTraining, "guide": config.GuideTraining, "text_head": config.TextHeadTraining,
-            "evaluator": config.EvaluatorTraining, "actor": config.ActorTraining,
-            "motionclip": config.MotionClipTraining, "motion3dgan": config.Motion3DGANTraining,
-            "lstm_filler": config.LSTMFillerTraining, "deformer": config.DeformationTraining,
-            "au_regressor": config.AURegressorTraining}
+RECIPES = {
+    "denoiser": DenoiserRecipe,
+    "guide": GuideRecipe,
+    "text_head": TextHeadRecipe,
+    "evaluator": EvaluatorRecipe,
+    "actor": ActorRecipe,
+    "motionclip": MotionClipRecipe,
+    "motion3dgan": Motion3DGANRecipe,
+    "lstm_filler": LSTMFillerRecipe,
+    "deformer": DeformationRecipe,
+    "au_regressor": AURegressorRecipe,
+}
+SETTINGS = {
+    "denoiser": config.DenoiserTraining,
+    "guide": config.GuideTraining,
+    "text_head": config.TextHeadTraining,
+    "evaluator": config.EvaluatorTraining,
+    "actor": config.ActorTraining,
+    "motionclip": config.MotionClipTraining,
+    "motion3dgan": config.Motion3DGANTraining,
+    "lstm_filler": config.LSTMFillerTraining,
+    "deformer": config.DeformationTraining,
+    "au_regressor": config.AURegressorTraining,
+}

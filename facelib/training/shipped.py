@@ -1,9 +1,12 @@
-"""Every shipped checkpoint (data/checkpoints) as the recipe that trains it (``training.train_all`` retrains them).
+"""Every shipped checkpoint (data/checkpoints) as the recipe that trains it
+(``training.train_all`` retrains them).
 
-``SHIPPED[name] = (model, settings)``: the model's recipe (training.RECIPES) with these settings changed from
-its defaults (facelib/config.py).  tests/test_training.py checks that every shipped checkpoint is here and
-that its recorded settings are these, so ``python -m facelib train all`` rebuilds exactly what is shipped.
+``SHIPPED[name] = (model, settings)``: the model's recipe (training.RECIPES) with these
+settings changed from its defaults (facelib/config.py).  tests/test_training.py checks
+that every shipped checkpoint is here and that its recorded settings are these, so
+``python -m facelib train all`` rebuilds exactly what is shipped.
 """
+
 from __future__ import annotations
 
 from ..checkpoints import checkpoint_name
@@ -18,22 +21,37 @@ SHIPPED = {
     "guide_coma_S": ("guide", {"classifier_type": "S"}),
     "guide_bu_I": ("guide", {"dataset": "bu"}),
     "guide_coma+bu_text": ("text_head", {}),
-    **{checkpoint_name("ic", d, c): ("evaluator", {"dataset": d, "classifier_type": c})
-       for d in ("coma", "bu", "coma+bu")
-       for c in ("I", "S")},
+    **{
+        checkpoint_name("ic", d, c): ("evaluator", {"dataset": d, "classifier_type": c})
+        for d in ("coma", "bu", "coma+bu")
+        for c in ("I", "S")
+    },
     "actor_coma": ("actor", {}),
     "actor_bu": ("actor", {"dataset": "bu"}),
     "motion3dgan_coma": ("motion3dgan", {}),
     "motion3dgan_bu": ("motion3dgan", {"dataset": "bu"}),
     "motionclip_coma+bu": ("motionclip", {}),
     "lstm_filler_coma": ("lstm_filler", {}),
-    **{checkpoint_name("deform", m, s): ("deformer", {"method": m, "split": s}) for m in _DEFORMER_METHODS
-       for s in ("identity", "expression")},
-    # Issue 25: Table 5 over three training seeds for ours, ours without attention and S2D (seed 0 is above).
-    **{checkpoint_name("deform", m, s, k): ("deformer", {"method": m, "split": s, "seed": k})
-       for m in ("ours", "no_attention", "s2d") for s in ("identity", "expression") for k in (1, 2)},
-    # Issue 27: the label-conditional denoiser of classifier-free guidance (tasks.label_control(guidance="cfg")).
+    **{
+        checkpoint_name("deform", m, s): ("deformer", {"method": m, "split": s})
+        for m in _DEFORMER_METHODS
+        for s in ("identity", "expression")
+    },
+    # Issue 25: Table 5 over three training seeds for ours, ours without attention and
+    # S2D (seed 0 is above).
+    **{
+        checkpoint_name("deform", m, s, k): (
+            "deformer",
+            {"method": m, "split": s, "seed": k},
+        )
+        for m in ("ours", "no_attention", "s2d")
+        for s in ("identity", "expression")
+        for k in (1, 2)
+    },
+    # Issue 27: the label-conditional denoiser of classifier-free guidance
+    # (tasks.label_control(guidance="cfg")).
     "denoiser_coma_cfg": ("denoiser", {"conditional": True}),
-    # Issue 28: the noisy AU-intensity regressor of AU-curve control (the fine-control chapter).
+    # Issue 28: the noisy AU-intensity regressor of AU-curve control (the fine-control
+    # chapter).
     "au_regressor_coma": ("au_regressor", {}),
 }
