@@ -19,7 +19,8 @@ The map of the package, bottom to top.  A module imports only from the layers be
    ``tables``: numbers with their intervals, Markdown tables, the paper's table beside
    ours.
 3. ``text``: the offline sentence encoder.  ``models``: networks and their configs
-   only.  ``checkpoints``: weights + JSON config, sha256-checked.
+   only.  ``checkpoints``: weights + JSON config, sha256-checked.  ``flow``: rectified
+   flow on the DDPM's path (its loss, Euler and Heun).
 4. ``guidance``: sampler hooks: Adagrad optimisation (Alg. 1-2), mean shift,
    reconstruction guidance.  ``inpainting``: known frames (Alg. 3).  ``rig_fit``: the
    rig fitted to landmarks.  ``toy``: a 2-D DDPM.  ``results``: stored full-scale
@@ -61,6 +62,7 @@ LAYERS = {
     "text": 3,
     "models": 3,
     "checkpoints": 3,
+    "flow": 3,
     "guidance": 4,
     "inpainting": 4,
     "rig_fit": 4,
@@ -90,6 +92,7 @@ __all__ = [
     "diffusion",
     "evaluation",
     "face",
+    "flow",
     "guidance",
     "inpainting",
     "meshio",

@@ -125,7 +125,8 @@ OPTIMIZERS = ("adam", "adamw")
 # What a denoiser's network outputs (models.denoiser converts each to eps): the noise
 # (paper, Eq. 8), the clean sequence x_0 (MDM, Tevet et al. 2023) or the velocity v =
 # sqrt(abar_t) eps - sqrt(1 - abar_t) x_0 (Salimans & Ho 2022)
-PREDICTIONS = ("eps", "x0", "v")
+# "u": the velocity eps - x_0 of rectified flow (facelib/flow.py; schedule "flow")
+PREDICTIONS = ("eps", "x0", "v", "u")
 
 
 def check_prediction(prediction):
@@ -223,9 +224,10 @@ class DenoiserTraining(Optimisation):
     # paper §4: 40 frames; (35, 45) for the variable-length model of App. A
     num_frames: object = NUM_FRAMES
     num_diffusion_steps: int = NUM_DIFFUSION_STEPS  # paper §4: T = 2000
-    schedule: str = "linear"  # paper §4: linear betas from 1e-4 to 0.02
+    # paper §4: linear betas from 1e-4 to 0.02 ("flow": a rectified flow, see flow.py)
+    schedule: str = "linear"
     # paper, Eq. 8: the network predicts the noise
-    # ("x0": MDM's; "v": Salimans & Ho 2022)
+    # ("x0": MDM's; "v": Salimans & Ho 2022; "u": the flow's velocity)
     prediction: str = "eps"
     # paper: None (the simple loss); a number: min-SNR-gamma (Hang et al. 2023)
     min_snr_gamma: float | None = None
@@ -254,6 +256,13 @@ class DenoiserTraining(Optimisation):
         if not 0 <= self.mirror <= 1:
             raise ValueError(f"mirror is a probability in [0, 1], got {self.mirror}")
         check_prediction(self.prediction)
+        if self.schedule == "flow" and self.prediction != "u":
+            raise ValueError(
+                "a rectified flow (schedule 'flow') predicts its velocity: use"
+                f" prediction='u', not {self.prediction!r}"
+            )
+        if self.schedule == "flow" and self.min_snr_gamma is not None:
+            raise ValueError("min_snr_gamma weighs the DDPM's loss, not the flow's")
         if self.min_snr_gamma is not None and not self.min_snr_gamma > 0:
             raise ValueError(
                 "min_snr_gamma must be a positive number or None, "

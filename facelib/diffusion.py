@@ -65,9 +65,25 @@ def cosine_betas(num_steps=2000, s=0.008, max_beta=0.999):
     return np.clip(1.0 - abar[1:] / abar[:-1], 0.0, max_beta)
 
 
+def flow_alphas_bar(tau):
+    """abar(tau) = (1 - tau)^2 / ((1 - tau)^2 + tau^2): rectified flow's straight path
+    x_tau = (1 - tau) x_0 + tau eps, divided by its scale sqrt((1 - tau)^2 + tau^2), is
+    the variance-preserving x_t at this abar (facelib/flow.py; numpy or torch)."""
+    return (1 - tau) ** 2 / ((1 - tau) ** 2 + tau**2)
+
+
+def flow_betas(num_steps=2000, max_beta=0.999):
+    """The betas whose abar_t is :func:`flow_alphas_bar` at tau = t / T (the last one
+    clipped, as the cosine schedule's, so that abar_T > 0)."""
+    _check_steps(num_steps)
+    abar = flow_alphas_bar(np.arange(num_steps + 1, dtype=np.float64) / num_steps)
+    return np.clip(1.0 - abar[1:] / abar[:-1], 0.0, max_beta)
+
+
 def named_betas(name, num_steps):
-    """Schedule by name: "linear" (the paper's) or "cosine"."""
-    schedules = {"linear": linear_betas, "cosine": cosine_betas}
+    """Schedule by name: "linear" (the paper's), "cosine" or "flow" (rectified flow's
+    path as a DDPM schedule)."""
+    schedules = {"linear": linear_betas, "cosine": cosine_betas, "flow": flow_betas}
     if name not in schedules:
         raise ValueError(
             f"unknown noise schedule {name!r}; allowed: {', '.join(schedules)}"
@@ -100,6 +116,15 @@ def _extract(array, t, x):
         device=x.device, dtype=x.dtype
     )
     return values.reshape(values.shape + (1,) * (x.ndim - values.ndim))
+
+
+def masked_mean(err, mask=None):
+    """The mean of err (B, F, 68, 3) over the valid frames of ``mask`` (B, F) (all
+    frames if None)."""
+    if mask is None:
+        return err.mean()
+    m = mask[:, :, None, None].to(err.dtype)
+    return (err * m).sum() / (m.sum() * err.shape[2] * err.shape[3])
 
 
 def _device_of(network):
@@ -538,20 +563,24 @@ class GaussianDiffusion:
         """The weight w_t of step t's eps-loss ||eps - eps_hat||^2 that makes it another
         objective (float64).
 
-        A network's x0 or v estimate is a fixed linear function of its eps estimate at
-        step t, so each target's loss is the eps-loss times a function of SNR_t:  ||x0 -
-        x0_hat||^2 = ||eps - eps_hat||^2 / SNR_t and ||v - v_hat||^2 = (1 + 1 / SNR_t)
-        ||eps - eps_hat||^2.  Min-SNR-gamma (Hang et al. 2023) weighs the x0-loss by
-        min(SNR_t, gamma), i.e. the eps-loss by min(SNR_t, gamma) / SNR_t, whatever the
-        target (``prediction`` then only changes what the network outputs, not the
-        loss)."""
+        A network's x0, v or u estimate is a fixed linear function of its eps estimate
+        at step t, so each target's loss is the eps-loss times a function of SNR_t:
+        ||x0 - x0_hat||^2 = ||eps - eps_hat||^2 / SNR_t, ||v - v_hat||^2 = (1 + 1 /
+        SNR_t) ||eps - eps_hat||^2 and ||u - u_hat||^2 = (1 + 1 / sqrt(SNR_t))^2 ||eps -
+        eps_hat||^2 (u = eps - x0, rectified flow's velocity).  Min-SNR-gamma (Hang et
+        al. 2023) weighs the x0-loss by min(SNR_t, gamma), i.e. the eps-loss by
+        min(SNR_t, gamma) / SNR_t, whatever the target (``prediction`` then only changes
+        what the network outputs, not the loss)."""
         check_prediction(prediction)
         snr = self.snr(t)
         if min_snr_gamma is not None:
             return np.minimum(snr, min_snr_gamma) / snr
-        return {"eps": np.ones_like(snr), "x0": 1.0 / snr, "v": 1.0 + 1.0 / snr}[
-            prediction
-        ]
+        return {
+            "eps": np.ones_like(snr),
+            "x0": 1.0 / snr,
+            "v": 1.0 + 1.0 / snr,
+            "u": (1.0 + 1.0 / np.sqrt(snr)) ** 2,
+        }[prediction]
 
     def training_loss(
         self,
@@ -595,10 +624,7 @@ class GaussianDiffusion:
             err = err * torch.as_tensor(
                 weights, dtype=err.dtype, device=err.device
             ).reshape(-1, 1, 1, 1)
-        if mask is None:
-            return err.mean()
-        m = mask[:, :, None, None].to(err.dtype)
-        return (err * m).sum() / (m.sum() * err.shape[2] * err.shape[3])
+        return masked_mean(err, mask)
 
     # -----------------------------------------------------------------------------
     # respacing

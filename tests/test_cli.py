@@ -129,7 +129,7 @@ def test_cli_train_reaches_every_setting_with_set(tmp_path, capsys):
             training_record["ema_decay"], training_record["anatomy_pool"]) == ("v", 5, 0.5, None, ["coma"])
     for bad, message in ((["--set", "predicton=v"], "NAME a setting of denoiser .*prediction"),
                          (["--set", "mirror=often"], "mirror: must be float, got 'often'"),
-                         (["--set", "prediction=score"], "unknown prediction target 'score'; allowed: eps, x0, v"),
+                         (["--set", "prediction=score"], "unknown prediction target 'score'; allowed: eps, x0, v, u"),
                          (["--set", "steps=4"], "repeats a setting"),
                          (["--set", "conditional=maybe"], "true or false")):
         with pytest.raises(SystemExit):

@@ -114,5 +114,5 @@ def test_every_prediction_target_returns_the_noise_estimate_and_starts_from_the_
             m = Denoiser(DenoiserConfig(**{**SMALL.__dict__, "prediction": p}))
             eps = torch.randn_like(x)
             torch.testing.assert_close(m.to_eps(x, t, m.from_eps(x, t, eps)), eps, rtol=1e-4, atol=1e-4)
-    with pytest.raises(ValueError, match="unknown prediction target 'score'; allowed: eps, x0, v"):
+    with pytest.raises(ValueError, match="unknown prediction target 'score'; allowed: eps, x0, v, u$"):
         Denoiser(DenoiserConfig(prediction="score"))

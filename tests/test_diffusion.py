@@ -21,7 +21,7 @@ def test_schedules():
     assert d.alphas_bar[-1] < 1e-8  # x_T is (almost) pure noise
     c = GaussianDiffusion(cosine_betas(2000))
     assert np.all(np.diff(c.alphas_bar) < 0)
-    with pytest.raises(ValueError, match="unknown noise schedule 'quadratic'; allowed: linear, cosine"):
+    with pytest.raises(ValueError, match="unknown noise schedule 'quadratic'; allowed: linear, cosine, flow$"):
         named_betas("quadratic", 10)
     with pytest.raises(ValueError, match="positive integer"):
         linear_betas(0)

@@ -333,3 +333,19 @@ def test_a_denoiser_with_another_target_or_weighting_trains_and_samples_by_its_r
     js.write_text(json.dumps(meta))
     with pytest.raises(ValueError, match="differs from its network's .* cannot be sampled correctly"):
         tasks.load_denoiser(str(tmp_path / "d"))
+
+
+def test_a_rectified_flow_trains_on_the_same_network_and_loop_and_samples_from_its_checkpoint(tmp_path):
+    from facelib import tasks
+    from facelib.flow import RectifiedFlow
+    r = _recipe(steps=4, schedule="flow", prediction="u")
+    assert isinstance(r.diffusion, RectifiedFlow)
+    model, history = training.fit(r, progress=False, validate_every=2)
+    assert set(history["held_out"]) == {"step", "t 1-500", "t 501-1000", "t 1001-1500", "t 1501-2000"}
+    assert all(np.isfinite(v).all() for v in history["held_out"].values())
+    pt, js = training.train_and_save(r, name=str(tmp_path / "f"), progress=False)
+    denoiser = tasks.load_denoiser(str(tmp_path / "f"))
+    assert (denoiser.model.config.schedule, denoiser.model.config.prediction) == ("flow", "u")
+    x = RectifiedFlow(denoiser.model.config.num_diffusion_steps).sample(
+        denoiser.model, (2, 40, 68, 3), 4, solver="heun", generator=torch.Generator().manual_seed(0))
+    assert x.shape == (2, 40, 68, 3) and torch.isfinite(x).all()

@@ -20,12 +20,17 @@ Its output layer starts at zero, so training starts from the best linear per-fra
 denoiser.
 
 What the network outputs (``prediction``, an ablation of the denoiser chapter): the
-noise eps (the paper's), the clean sequence x_0 (MDM) or the velocity v = sqrt(abar_t)
-eps - sqrt(1 - abar_t) x_0 (Salimans & Ho 2022). The residual is added to the Gaussian
-estimate written as that target, and :meth:`Denoiser.forward` always returns the noise
-estimate it implies (eps = (x_t - sqrt(abar_t) x_0) / sqrt(1 - abar_t) = sqrt(1 -
-abar_t) x_t + sqrt(abar_t) v), so every sampler and guidance of the book runs any of
-them unchanged.
+noise eps (the paper's), the clean sequence x_0 (MDM), the velocity v = sqrt(abar_t)
+eps - sqrt(1 - abar_t) x_0 (Salimans & Ho 2022) or rectified flow's velocity u = eps -
+x_0 (facelib/flow.py). The residual is added to the Gaussian estimate written as that
+target, and :meth:`Denoiser.forward` always returns the noise estimate it implies (eps =
+(x_t - sqrt(abar_t) x_0) / sqrt(1 - abar_t) = sqrt(1 - abar_t) x_t + sqrt(abar_t) v =
+(x_t + sqrt(abar_t) u) / (sqrt(abar_t) + sqrt(1 - abar_t))), so every sampler and
+guidance of the book runs any of them unchanged.
+
+The schedule "flow" is rectified flow's path (diffusion.flow_alphas_bar): its time
+labels are continuous, t = tau T with tau in [0, 1], and abar is computed, not looked
+up.
 """
 
 from __future__ import annotations
@@ -35,7 +40,7 @@ from dataclasses import asdict, dataclass
 import torch
 from torch import nn
 
-from ..diffusion import check_prediction, named_betas
+from ..diffusion import check_prediction, flow_alphas_bar, named_betas
 from .bit import BiT, check_sequence_input
 
 
@@ -53,7 +58,8 @@ class DenoiserConfig:
     gaussian_skip: bool = True  # our addition (see the module docstring)
     num_diffusion_steps: int = 2000  # the schedule the skip needs (paper §4)
     schedule: str = "linear"
-    # what the network outputs: "eps" (paper), "x0" (MDM) or "v"; forward returns eps
+    # what the network outputs: "eps" (paper), "x0" (MDM), "v" or "u" (rectified flow);
+    # forward returns eps
     prediction: str = "eps"
     # > 0: label-conditional (classifier-free guidance), a label token before the frames
     num_classes: int = 0
@@ -98,7 +104,12 @@ class Denoiser(BiT):
         self.prior_variances.copy_(variances.clamp_min(0).float())
 
     def _abar(self, t, xt):
-        """abar_t for time labels t (B,), shaped (B, 1, 1, 1) on x_t's device."""
+        """abar_t for time labels t (B,), shaped (B, 1, 1, 1) on x_t's device (the flow
+        schedule's computed at tau = t / T, any other's looked up at the nearest step).
+        """
+        if self.config.schedule == "flow":
+            tau = (t.to(xt.device) / self.config.num_diffusion_steps).clamp(0, 1)
+            return flow_alphas_bar(tau.double()).float().reshape(-1, 1, 1, 1)
         return (
             self.alphas_bar[t.round().long().clamp(0, len(self.alphas_bar) - 1)]
             .to(xt.device)
@@ -106,13 +117,15 @@ class Denoiser(BiT):
         )
 
     def to_eps(self, xt, t, output):
-        """The noise estimate that the network's ``output`` (eps, x_0 or v:
+        """The noise estimate that the network's ``output`` (eps, x_0, v or u:
         ``config.prediction``) implies."""
         abar = self._abar(t, xt)
         if self.config.prediction == "x0":
             return (xt - abar.sqrt() * output) / (1 - abar).sqrt()
         if self.config.prediction == "v":
             return (1 - abar).sqrt() * xt + abar.sqrt() * output
+        if self.config.prediction == "u":
+            return (xt + abar.sqrt() * output) / (abar.sqrt() + (1 - abar).sqrt())
         return output
 
     def from_eps(self, xt, t, eps):
@@ -124,6 +137,8 @@ class Denoiser(BiT):
             return x0
         if self.config.prediction == "v":
             return abar.sqrt() * eps - (1 - abar).sqrt() * x0
+        if self.config.prediction == "u":
+            return eps - x0
         return eps
 
     def gaussian_eps(self, xt, t):
@@ -134,11 +149,38 @@ class Denoiser(BiT):
         y = y * (1 - abar).sqrt() / (abar * self.prior_variances + 1 - abar)
         return (y @ self.prior_basis.T).reshape(xt.shape)
 
+    def gaussian_u(self, xt, t):
+        """E[eps - x_0 | x_t] if every frame were drawn from N(0, Sigma): the Gaussian
+        estimate as a rectified-flow velocity, finite at abar = 0 where x_0 cannot be
+        had from eps (E[x_0 | x_t] = sqrt(abar) Sigma (abar Sigma + (1 - abar) I)^-1
+        x_t)."""
+        abar = self._abar(t, xt)[..., 0]
+        y = xt.reshape(xt.shape[0], xt.shape[1], -1) @ self.prior_basis
+        y = y * ((1 - abar).sqrt() - abar.sqrt() * self.prior_variances)
+        y = y / (abar * self.prior_variances + 1 - abar)
+        return (y @ self.prior_basis.T).reshape(xt.shape)
+
     def forward(self, xt, t, mask=None, labels=None):
         """Noise estimate for x_t at steps t; ``mask`` (B, F) bool marks the valid
         frames.  A label-conditional denoiser (``num_classes`` > 0) reads ``labels``
         (B,) class indices, ``num_classes`` meaning "no label" (None: no label for any);
         an unconditional one takes none."""
+        return self.to_eps(xt, t, self.output(xt, t, mask, labels))
+
+    def velocity(self, xt, t, mask=None, labels=None):
+        """Rectified flow's velocity estimate u = eps - x_0 for x_t at steps t (the
+        network's own output when it predicts u; otherwise from its noise estimate,
+        which needs abar_t > 0)."""
+        output = self.output(xt, t, mask, labels)
+        if self.config.prediction == "u":
+            return output
+        eps = self.to_eps(xt, t, output)
+        abar = self._abar(t, xt)
+        return eps - (xt - (1 - abar).sqrt() * eps) / abar.sqrt()
+
+    def output(self, xt, t, mask=None, labels=None):
+        """The network's estimate of its target (``config.prediction``), the Gaussian
+        estimate included; arguments as :meth:`forward`'s."""
         check_sequence_input(xt, t, mask, self.config.num_landmarks)
         k = self.config.num_classes
         if not k:
@@ -165,11 +207,13 @@ class Denoiser(BiT):
             )[:, 1:]
         # the network's estimate of its target (config.prediction)
         output = self.out(tokens).reshape(xt.shape)
-        if self.config.gaussian_skip:
+        if self.config.gaussian_skip and self.config.prediction == "u":
+            output = output + self.gaussian_u(xt, t.to(xt.device))
+        elif self.config.gaussian_skip:
             output = output + self.from_eps(
                 xt, t, self.gaussian_eps(xt, t.to(xt.device))
             )
-        return self.to_eps(xt, t, output)
+        return output
 
     def config_dict(self):
         return asdict(self.config)

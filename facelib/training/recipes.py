@@ -23,6 +23,7 @@ from .. import config, data, deformation, srvf
 from ..face import get_template
 from ..checkpoints import checkpoint_name
 from ..diffusion import GaussianDiffusion, named_betas
+from ..flow import RectifiedFlow
 from ..inpainting import FILL_SETTINGS, fill_masks
 from ..models import actor, lstm_filler, motion3dgan, motionclip
 from ..models.au_regressor import AURegressor, AURegressorConfig
@@ -128,7 +129,8 @@ HELD_OUT_SEQUENCES = 256
 class DenoiserRecipe(Recipe):
     """eps_theta trained with the simple loss of Eq. 8 on anatomy-augmented sequences
     (or, by its settings, another prediction target, min-SNR-gamma weighting, left-right
-    mirroring)."""
+    mirroring; or, with the schedule "flow", the same network as a rectified flow: the
+    velocity loss of facelib/flow.py at tau ~ U(0, 1))."""
 
     kind = "denoiser"
 
@@ -173,8 +175,13 @@ class DenoiserRecipe(Recipe):
         )
         self.pool = (torch.as_tensor(pool) / self.normalizer.scale).float()
         self.size = len(self.x_all)
-        self.diffusion = GaussianDiffusion(
-            named_betas(settings.schedule, settings.num_diffusion_steps)
+        self.flow = settings.schedule == "flow"
+        self.diffusion = (
+            RectifiedFlow(settings.num_diffusion_steps)
+            if self.flow
+            else GaussianDiffusion(
+                named_betas(settings.schedule, settings.num_diffusion_steps)
+            )
         )
         self.held_out = self._held_out_batch(settings)
 
@@ -206,12 +213,20 @@ class DenoiserRecipe(Recipe):
             buckets[f"t {low}-{high}"] = (t, torch.randn(x0.shape, generator=g))
         return x0, mask, buckets
 
+    def _times(self, t):
+        """The objective's time argument for steps t (B,): {"t": t}, or the flow's
+        {"tau": t / T}."""
+        if self.flow:
+            return {"tau": t.double() / self.settings.num_diffusion_steps}
+        return {"t": t}
+
     @torch.no_grad()
     def validate(self, model):
         """Eq. 8's loss ||eps - eps_theta(x_t, t)||^2 on held-out (test) sequences per
         noise-level bucket, with the same draws at every call: {"t 1-500": loss, ...}.
         The eps-loss whatever the prediction target, so that runs with different targets
-        compare (the training loss of an x0 or v run is weighted otherwise).
+        compare (the training loss of an x0 or v run is weighted otherwise); a flow's
+        own velocity loss at tau = t / T.
         """
         x0, mask, buckets = self.held_out
         was_training = model.training
@@ -222,7 +237,7 @@ class DenoiserRecipe(Recipe):
             losses[name] = self.diffusion.training_loss(
                 model,
                 x0.to(self.device),
-                t=t,
+                **self._times(t),
                 eps=eps.to(self.device),
                 mask=mask.to(self.device) if self.variable else None,
             ).item()
@@ -257,7 +272,15 @@ class DenoiserRecipe(Recipe):
         )
         x0 = mirror_faces(x0, self.normalizer, self.settings.mirror, draws)
         x0 = x0 * self.mask_all[idx][:, :, None, None]
-        t = draws.randint(1, self.settings.num_diffusion_steps + 1)
+        if self.flow:
+            # tau in (0, 1]
+            objective = {"tau": 1 - draws.rand().double()}
+        else:
+            objective = {
+                "t": draws.randint(1, self.settings.num_diffusion_steps + 1),
+                "prediction": self.settings.prediction,
+                "min_snr_gamma": self.settings.min_snr_gamma,
+            }
         inputs = {}
         # classifier-free guidance: drop the label now and then
         if self.architecture.num_classes:
@@ -268,11 +291,9 @@ class DenoiserRecipe(Recipe):
         loss = self.diffusion.training_loss(
             model,
             x0,
-            t=t,
             eps=draws.randn(*x0.shape[1:]),
             mask=self.mask_all[idx] if self.variable else None,
-            prediction=self.settings.prediction,
-            min_snr_gamma=self.settings.min_snr_gamma,
+            **objective,
             **inputs,
         )
         return loss, {"loss": loss.item()}
