@@ -388,7 +388,10 @@ def main(argv=None):
             " the baselines of Table 1; motionclip: the baseline of Table 2;"
             " lstm_filler: the baseline of Table 3; deformer: the mesh deformation of"
             " §3.3 and the baselines of Table 5; au_regressor: R(x_t, t) of AU-curve"
-            " control (the fine-control chapter)"
+            " control (the fine-control chapter); student: one round of progressive"
+            " distillation (--set teacher=NAME --set teacher_steps=N: a student of N/2"
+            " steps); a rectified flow is the denoiser with --set schedule=flow --set"
+            " prediction=u"
         ),
     )
     p.add_argument(

@@ -292,6 +292,52 @@ class GuideTraining(Optimisation):
 
 
 @dataclass(frozen=True)
+class DistillationTraining(Optimisation):
+    """One round of progressive distillation (Salimans & Ho 2022, Alg. 2): a student of
+    ``teacher_steps / 2`` deterministic (DDIM) steps learns to land, in one step, where
+    two steps of the teacher's ``teacher_steps``-step chain land.  Each round's student
+    is the next round's teacher (256 -> 128 -> ... -> 1).  The student starts from the
+    teacher's weights and predicts v (their choice: eps is unstable at few steps, where
+    x_0 = (x_t - sqrt(1 - abar) eps) / sqrt(abar) divides by a small number)."""
+
+    # a denoiser checkpoint (name or path): the DDPM, or the previous round's student
+    teacher: str = "denoiser_coma"
+    teacher_steps: int = 256  # their choice for the first teacher; even, so it halves
+    steps: int = 2000  # our choice (theirs: 50K per round on far larger models)
+    batch_size: int = 64
+    lr: float = 2e-4  # our choice (theirs: 1e-4 at batch 128-2048)
+    warmup: int = 100
+    final_lr_fraction: float = 0.1
+    grad_clip: float | None = 1.0
+    ema_decay: float | None = 0.999
+    # theirs: "truncated SNR", max(SNR_t, 1) on the x_0 error
+    weighting: str = "truncated_snr"
+
+    def __post_init__(self):
+        super().__post_init__()
+        _check_positive_int("teacher_steps", self.teacher_steps)
+        if self.teacher_steps % 2 or self.teacher_steps > NUM_DIFFUSION_STEPS:
+            raise ValueError(
+                "teacher_steps must be even and at most T ="
+                f" {NUM_DIFFUSION_STEPS}: the student takes every other step, got"
+                f" {self.teacher_steps}"
+            )
+        if self.weighting not in DISTILLATION_WEIGHTINGS:
+            raise ValueError(
+                f"unknown distillation weighting {self.weighting!r}; allowed:"
+                f" {', '.join(DISTILLATION_WEIGHTINGS)}"
+            )
+
+    def fast(self):
+        return replace(self, steps=20, warmup=5)
+
+
+# the weight of the x_0 error at step t: max(SNR_t, 1) (Salimans & Ho) or SNR_t (the
+# eps error)
+DISTILLATION_WEIGHTINGS = ("truncated_snr", "snr")
+
+
+@dataclass(frozen=True)
 class AURegressorTraining(Optimisation):
     """The noisy AU-intensity regressor R(x_t, t) of the fine-control chapter (not in
     the paper): the mean squared error of its per-frame AU intensities against the

@@ -80,6 +80,17 @@ def flow_betas(num_steps=2000, max_beta=0.999):
     return np.clip(1.0 - abar[1:] / abar[:-1], 0.0, max_beta)
 
 
+def halving_steps(steps, num_steps=2000):
+    """The chain of ``steps`` steps of the T = ``num_steps`` chain whose every other
+    step is the chain of steps / 2: round(i T / steps), i = 0..steps (int array, 0
+    first). Progressive distillation's student of steps / 2 steps spans two of these at
+    a time."""
+    _check_steps(steps)
+    if steps > num_steps:
+        raise ValueError(f"a chain of T = {num_steps} has at most {num_steps} steps")
+    return np.round(np.arange(steps + 1) * num_steps / steps).astype(int)
+
+
 def named_betas(name, num_steps):
     """Schedule by name: "linear" (the paper's), "cosine" or "flow" (rectified flow's
     path as a DDPM schedule)."""

@@ -178,6 +178,20 @@ class Denoiser(BiT):
         abar = self._abar(t, xt)
         return eps - (xt - (1 - abar).sqrt() * eps) / abar.sqrt()
 
+    def x0(self, xt, t, mask=None, labels=None):
+        """The clean-sequence estimate x0_hat(x_t, t), computed in the target's own form
+        (x_0, sqrt(abar) x_t - sqrt(1 - abar) v, or from u), so that it stays exact
+        where abar_t is small and eps would be divided by sqrt(abar_t)."""
+        output = self.output(xt, t, mask, labels)
+        abar = self._abar(t, xt)
+        if self.config.prediction == "x0":
+            return output
+        if self.config.prediction == "v":
+            return abar.sqrt() * xt - (1 - abar).sqrt() * output
+        if self.config.prediction == "u":
+            return (xt - (1 - abar).sqrt() * output) / (abar.sqrt() + (1 - abar).sqrt())
+        return (xt - (1 - abar).sqrt() * output) / abar.sqrt()
+
     def output(self, xt, t, mask=None, labels=None):
         """The network's estimate of its target (``config.prediction``), the Gaussian
         estimate included; arguments as :meth:`forward`'s."""

@@ -13,7 +13,8 @@ one process.
 
 from __future__ import annotations
 
-from dataclasses import asdict
+from dataclasses import asdict, fields, replace
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -22,7 +23,7 @@ from torch import nn
 from .. import config, data, deformation, srvf
 from ..face import get_template
 from ..checkpoints import checkpoint_name
-from ..diffusion import GaussianDiffusion, named_betas
+from ..diffusion import GaussianDiffusion, halving_steps, named_betas
 from ..flow import RectifiedFlow
 from ..inpainting import FILL_SETTINGS, fill_masks
 from ..models import actor, lstm_filler, motion3dgan, motionclip
@@ -36,6 +37,7 @@ from ..models.noisy_classifier import (
     NoisyTextHead,
     TextHeadConfig,
 )
+from ..tasks import load_denoiser
 from ..text import MODEL_NAME, description_embeddings, get_encoder
 from .loop import Draws, Objective
 
@@ -265,13 +267,18 @@ class DenoiserRecipe(Recipe):
         )
         return model
 
-    def loss(self, model, draws):
+    def clean_batch(self, draws):
+        """A batch of training sequences as the denoiser sees them: (indices, x_0),
+        anatomy-swapped, mirrored, padded frames zero."""
         idx = draws.examples(self.size)
         x0 = swap_anatomy(
             self.x_all[idx], self.own[idx], self.pool, self.settings.anatomy_swap, draws
         )
         x0 = mirror_faces(x0, self.normalizer, self.settings.mirror, draws)
-        x0 = x0 * self.mask_all[idx][:, :, None, None]
+        return idx, x0 * self.mask_all[idx][:, :, None, None]
+
+    def loss(self, model, draws):
+        idx, x0 = self.clean_batch(draws)
         if self.flow:
             # tau in (0, 1]
             objective = {"tau": 1 - draws.rand().double()}
@@ -323,6 +330,131 @@ class DenoiserRecipe(Recipe):
             if on
         )
         return checkpoint_name("denoiser", self.settings.dataset, variant or None)
+
+
+class DistillationRecipe(Recipe):
+    """A student of half the teacher's deterministic steps (progressive distillation,
+    Salimans & Ho 2022, Alg. 2), trained on the teacher's own data.
+
+    For a student step from t to t'' (two teacher steps, t -> t' -> t'', on
+    :func:`~facelib.diffusion.halving_steps`), x_t is drawn from q(x_t | x_0), the
+    teacher's two DDIM steps give x_t'', and the student's target is the x_0 from which
+    one DDIM step lands there:
+
+        x0~ = (x_t'' - (sigma_t'' / sigma_t) x_t) / (alpha_t'' - (sigma_t'' / sigma_t)
+        alpha_t),
+
+    with alpha = sqrt(abar), sigma = sqrt(1 - abar).  The loss is w_t ||x0~ -
+    x0_hat||^2, w_t = max(SNR_t, 1).
+    """
+
+    kind = "denoiser"
+
+    def __init__(self, settings=config.DistillationTraining(), model_config=None):
+        self.settings = settings
+        self.teacher = load_denoiser(settings.teacher)
+        self.teacher.model.eval().requires_grad_(False)
+        recorded = self.teacher.meta["training"]
+        # the teacher's data as the teacher saw it (a student records its DDPM's)
+        self.data = DenoiserRecipe(
+            config.DenoiserTraining(
+                **{
+                    f.name: _as_setting(recorded[f.name])
+                    for f in fields(config.DenoiserTraining)
+                    if f.name in recorded
+                    and f.name not in ("steps", "warmup", "prediction")
+                }
+            )
+        )
+        self.distilled_from = recorded.get(
+            "distilled_from", Path(settings.teacher).name
+        )
+        t = self.teacher.model.config
+        if t.schedule == "flow" or t.num_classes:
+            raise ValueError(
+                f"{settings.teacher}: distillation takes an unconditional DDPM denoiser"
+                " (or a student of one)"
+            )
+        self.architecture = model_config or replace(t, prediction="v")
+        self.name = (
+            f"student of {settings.teacher} ({settings.teacher_steps // 2} steps)"
+        )
+        self.size = self.data.size
+        self.grid = torch.as_tensor(
+            halving_steps(settings.teacher_steps, t.num_diffusion_steps)
+        )
+        self.alphas_bar = torch.as_tensor(self.data.diffusion.alphas_bar)
+
+    def build(self, generator):
+        model = Denoiser(self.architecture)
+        # the teacher's weights (an eps teacher's residual read as v's: close at small
+        # t)
+        model.load_state_dict(self.teacher.model.state_dict())
+        return model
+
+    def to(self, device):
+        super().to(device)
+        self.teacher.model.to(device)
+        self.data.to(device)
+        return self
+
+    def _ddim(self, network, x, t, t_next):
+        """One deterministic DDIM step of ``network`` from steps t to t_next (B,)."""
+        a, a_next = (
+            self.alphas_bar[s].to(x.dtype).reshape(-1, 1, 1, 1) for s in (t, t_next)
+        )
+        x0 = network.x0(x, t.to(x.dtype))
+        eps = (x - a.sqrt() * x0) / (1 - a).sqrt()
+        return a_next.sqrt() * x0 + (1 - a_next).sqrt() * eps
+
+    def loss(self, model, draws):
+        _, x0 = self.data.clean_batch(draws)
+        j = draws.randint(1, self.settings.teacher_steps // 2 + 1)
+        t, t_mid, t_end = self.grid[2 * j], self.grid[2 * j - 1], self.grid[2 * j - 2]
+        a, a_end = (
+            self.alphas_bar[s].to(x0.dtype).reshape(-1, 1, 1, 1) for s in (t, t_end)
+        )
+        eps = draws.randn(*x0.shape[1:])
+        xt = a.sqrt() * x0 + (1 - a).sqrt() * eps
+        with torch.no_grad():
+            teacher = self.teacher.model
+            x_end = self._ddim(teacher, self._ddim(teacher, xt, t, t_mid), t_mid, t_end)
+            ratio = ((1 - a_end) / (1 - a)).sqrt()
+            target = (x_end - ratio * xt) / (a_end.sqrt() - ratio * a.sqrt())
+        snr = a / (1 - a)
+        weight = snr.clamp_min(1) if self.settings.weighting == "truncated_snr" else snr
+        err = weight * (target - model.x0(xt, t.to(xt.dtype))) ** 2
+        loss = err.mean()
+        return loss, {"loss": loss.item()}
+
+    def metadata(self, model):
+        training = {
+            **asdict(self.data.settings),
+            "steps": self.settings.steps,
+            "prediction": model.config.prediction,
+            "distilled_from": self.distilled_from,
+            "distillation": asdict(self.settings),
+            "sampler_steps": (
+                halving_steps(
+                    self.settings.teacher_steps // 2, model.config.num_diffusion_steps
+                )[1:].tolist()
+            ),
+            "model": asdict(model.config),
+        }
+        return {
+            "training": training,
+            "normalizer": self.teacher.meta["normalizer"],
+            "torch_version": torch.__version__,
+            "data_dir": str(config.SYNTHETIC_DIR.name),
+        }
+
+    def checkpoint_name(self):
+        return f"student_{self.distilled_from}_{self.settings.teacher_steps // 2}"
+
+
+def _as_setting(value):
+    """A recorded (JSON) setting as the dataclass holds it: lists become tuples."""
+    return tuple(value) if isinstance(value, list) else value
 
 
 # --------------------------------------------------------------------------- networks
@@ -882,6 +1014,7 @@ RECIPES = {
     "lstm_filler": LSTMFillerRecipe,
     "deformer": DeformationRecipe,
     "au_regressor": AURegressorRecipe,
+    "student": DistillationRecipe,
 }
 SETTINGS = {
     "denoiser": config.DenoiserTraining,
@@ -894,4 +1027,5 @@ SETTINGS = {
     "lstm_filler": config.LSTMFillerTraining,
     "deformer": config.DeformationTraining,
     "au_regressor": config.AURegressorTraining,
+    "student": config.DistillationTraining,
 }
