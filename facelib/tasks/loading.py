@@ -74,8 +74,19 @@ class TrainedDenoiser:
     def diffusion_with(self, steps=None, variance=None, eta=None):
         """The full T-step diffusion (steps=None) or a respaced one with ``steps``
         steps; ``variance`` ("beta", "posterior") replaces the sampler's sigma_t^2
-        (None: the denoiser's own); ``eta`` samples by DDIM.
+        (None: the denoiser's own); ``eta`` samples by DDIM.  A distilled student
+        samples deterministically on the steps it was distilled for, and only there.
         """
+        student_steps = self.meta.get("training", {}).get("sampler_steps")
+        if student_steps is not None:
+            if steps not in (None, len(student_steps)) or eta not in (None, 0):
+                raise ValueError(
+                    f"{self.meta.get('name', 'this checkpoint')} is a distilled student"
+                    f" of {len(student_steps)} deterministic steps: sample it with"
+                    f" steps={len(student_steps)} (or None) and eta 0 (or None), not"
+                    f" steps={steps}, eta={eta}"
+                )
+            return self.diffusion.respace(student_steps).with_eta(0.0)
         diffusion = self.diffusion
         if variance is not None and variance != diffusion.variance:
             diffusion = GaussianDiffusion(diffusion.betas[1:], variance)
