@@ -540,7 +540,7 @@ TEXT_DATASET = "coma+bu"
 # Alg. 2's lambda (paper: 0.01) and Adagrad rate (not in the paper) for a chain of
 # TEXT_LR_REFERENCE_STEPS reverse steps: the pick of the text-control chapter's sweep
 # (72 raw-text sequences, 100 steps, best accuracy - 2 FID)
-# results/text_sweep_cosine.json: lambda 0.001, rate 0.1 (77.8 % at FID 23.0).
+# results/text_sweep_cosine.json: lambda 0.001, rate 0.1 (79.2 % at FID 19.6).
 TEXT_GUIDANCE_WEIGHT = 0.001
 TEXT_LR = 0.1
 TEXT_LR_REFERENCE_STEPS = 100
@@ -553,10 +553,10 @@ HEAD_INPUTS = ("x_t", "x0_hat")
 # wording (guidance.ContrastiveScore)
 TEXT_SCORES = ("cosine", "contrastive")
 # The contrastive score's lambda (the paper's 0.01) and Adagrad rate at
-# TEXT_LR_REFERENCE_STEPS steps: the pick of appendix A1's stored sweep (72 sequences,
-# two seeds, best Acc - 2 FID summed over both tasks)
+# TEXT_LR_REFERENCE_STEPS steps: at the paper's lambda, the pick of appendix A1's stored
+# sweep (72 enriched texts, best Acc - 2 FID)
 CONTRASTIVE_GUIDANCE_WEIGHT = 0.01
-# results/text_sweep_contrastive.json: rate 0.06 (59.7 % at FID 23.1).
+# results/text_sweep_contrastive.json: rate 0.06 (56.9 % at FID 25.0).
 CONTRASTIVE_LR = 0.06
 # How sharply a text is matched to the training descriptions by the contrastive score
 # (our choice: an enriched sentence and its other order, at a cosine of about 0.985, get
