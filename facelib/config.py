@@ -310,8 +310,8 @@ class DistillationTraining(Optimisation):
     final_lr_fraction: float = 0.1
     grad_clip: float | None = 1.0
     ema_decay: float | None = 0.999
-    # theirs: "truncated SNR", max(SNR_t, 1) on the x_0 error
-    weighting: str = "truncated_snr"
+    # ours: "landing" (DISTILLATION_WEIGHTINGS); theirs: "truncated_snr"
+    weighting: str = "landing"
 
     def __post_init__(self):
         super().__post_init__()
@@ -332,9 +332,13 @@ class DistillationTraining(Optimisation):
         return replace(self, steps=20, warmup=5)
 
 
-# the weight of the x_0 error at step t: max(SNR_t, 1) (Salimans & Ho) or SNR_t (the
-# eps error)
-DISTILLATION_WEIGHTINGS = ("truncated_snr", "snr")
+# The student's error: "landing": where its one step lands against where the teacher's
+# two land, in units of the noise there (sqrt(1 - abar_t'')), and the x_0 error weighted
+# by max(SNR_t, 1) on the last step.  Our choice: on the linear schedule the x_0 target
+# divides by sqrt(abar_t'') - (sigma_t'' / sigma_t) sqrt(abar_t), which is ~3e-4 near
+# T, so the x_0 error of "truncated_snr" (Salimans & Ho: max(SNR_t, 1) on the x_0
+# error) or "snr" (the eps error) is dominated by the teacher's rounding there.
+DISTILLATION_WEIGHTINGS = ("landing", "truncated_snr", "snr")
 
 
 @dataclass(frozen=True)

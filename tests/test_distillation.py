@@ -78,7 +78,7 @@ def test_a_round_trains_saves_and_teaches_the_next(round_of_8, tmp_path):
 def test_bad_distillation_settings_are_refused():
     with pytest.raises(ValueError, match="teacher_steps must be even"):
         config.DistillationTraining(teacher_steps=7)
-    with pytest.raises(ValueError, match="unknown distillation weighting 'x'; allowed: truncated_snr, snr"):
+    with pytest.raises(ValueError, match="unknown distillation weighting 'x'; allowed: landing, truncated_snr, snr"):
         config.DistillationTraining(weighting="x")
     with pytest.raises(ValueError, match="unconditional DDPM denoiser"):
         training.DistillationRecipe(config.DistillationTraining(teacher="denoiser_coma_cfg"))
@@ -95,3 +95,22 @@ def test_a_student_samples_on_its_own_steps_and_refuses_others(tmp_path):
     for bad in ({"steps": 3}, {"steps": 4, "eta": 1.0}):
         with pytest.raises(ValueError, match="distilled student of 4 deterministic steps"):
             student.diffusion_with(**bad)
+
+
+def test_the_landing_error_is_the_x0_error_times_the_steps_conditioning():
+    """The student's landing misses the teacher's by (sqrt(abar'') - (sigma''/sigma)
+    sqrt(abar)) times its x_0 error: the factor that makes the x_0 target ill-conditioned
+    near T (about 3e-4 on the linear schedule), which the "landing" loss never divides by."""
+    from facelib.diffusion import GaussianDiffusion, linear_betas
+    from facelib.training.recipes import _ddim_step
+    ab = torch.as_tensor(GaussianDiffusion(linear_betas(2000)).alphas_bar)
+    g = torch.Generator().manual_seed(1)
+    xt, x_end, x0_hat = (torch.randn(2, 5, 68, 3, generator=g, dtype=torch.float64) for _ in range(3))
+    for t, t_end in ((750, 500), (2000, 1984)):
+        a, a_end = ab[t], ab[t_end]
+        ratio = ((1 - a_end) / (1 - a)).sqrt()
+        factor = a_end.sqrt() - ratio * a.sqrt()
+        target = (x_end - ratio * xt) / factor
+        landed = _ddim_step(xt, x0_hat, a, a_end)
+        torch.testing.assert_close(x_end - landed, factor * (target - x0_hat))
+    assert abs(factor) < 1e-3  # near T

@@ -403,9 +403,7 @@ class DistillationRecipe(Recipe):
         a, a_next = (
             self.alphas_bar[s].to(x.dtype).reshape(-1, 1, 1, 1) for s in (t, t_next)
         )
-        x0 = network.x0(x, t.to(x.dtype))
-        eps = (x - a.sqrt() * x0) / (1 - a).sqrt()
-        return a_next.sqrt() * x0 + (1 - a_next).sqrt() * eps
+        return _ddim_step(x, network.x0(x, t.to(x.dtype)), a, a_next)
 
     def loss(self, model, draws):
         _, x0 = self.data.clean_batch(draws)
@@ -421,9 +419,24 @@ class DistillationRecipe(Recipe):
             x_end = self._ddim(teacher, self._ddim(teacher, xt, t, t_mid), t_mid, t_end)
             ratio = ((1 - a_end) / (1 - a)).sqrt()
             target = (x_end - ratio * xt) / (a_end.sqrt() - ratio * a.sqrt())
+        x0_hat = model.x0(xt, t.to(xt.dtype))
         snr = a / (1 - a)
-        weight = snr.clamp_min(1) if self.settings.weighting == "truncated_snr" else snr
-        err = weight * (target - model.x0(xt, t.to(xt.dtype))) ** 2
+        if self.settings.weighting == "landing":
+            # where the student's step lands, against the teacher's two, in units of
+            # the noise there; the last step (to t'' = 0) lands on x_0 itself
+            landed = _ddim_step(xt, x0_hat, a, a_end)
+            scale = (1 - a_end).sqrt().clamp_min(1e-3)
+            last = (t_end == 0).reshape(-1, 1, 1, 1)
+            err = torch.where(
+                last,
+                snr.clamp_min(1) * (x_end - x0_hat) ** 2,
+                ((x_end - landed) / scale) ** 2,
+            )
+        else:
+            weight = (
+                snr.clamp_min(1) if self.settings.weighting == "truncated_snr" else snr
+            )
+            err = weight * (target - x0_hat) ** 2
         loss = err.mean()
         return loss, {"loss": loss.item()}
 
@@ -450,6 +463,13 @@ class DistillationRecipe(Recipe):
 
     def checkpoint_name(self):
         return f"student_{self.distilled_from}_{self.settings.teacher_steps // 2}"
+
+
+def _ddim_step(x, x0, a, a_next):
+    """DDIM (eta = 0) from noise level abar = a to a_next given the clean estimate x0:
+    sqrt(a_next) x0 + sqrt(1 - a_next) (x - sqrt(a) x0) / sqrt(1 - a)."""
+    eps = (x - a.sqrt() * x0) / (1 - a).sqrt()
+    return a_next.sqrt() * x0 + (1 - a_next).sqrt() * eps
 
 
 def _as_setting(value):
