@@ -129,6 +129,13 @@ def _extract(array, t, x):
     return values.reshape(values.shape + (1,) * (x.ndim - values.ndim))
 
 
+def ddim_step(x, x0, a, a_next):
+    """DDIM (eta = 0) from noise level abar = a to a_next given the clean estimate x0:
+    sqrt(a_next) x0 + sqrt(1 - a_next) (x - sqrt(a) x0) / sqrt(1 - a)."""
+    eps = (x - a.sqrt() * x0) / (1 - a).sqrt()
+    return a_next.sqrt() * x0 + (1 - a_next).sqrt() * eps
+
+
 def masked_mean(err, mask=None):
     """The mean of err (B, F, 68, 3) over the valid frames of ``mask`` (B, F) (all
     frames if None)."""

@@ -102,7 +102,7 @@ def test_the_landing_error_is_the_x0_error_times_the_steps_conditioning():
     sqrt(abar)) times its x_0 error: the factor that makes the x_0 target ill-conditioned
     near T (about 3e-4 on the linear schedule), which the "landing" loss never divides by."""
     from facelib.diffusion import GaussianDiffusion, linear_betas
-    from facelib.training.recipes import _ddim_step
+    from facelib.diffusion import ddim_step
     ab = torch.as_tensor(GaussianDiffusion(linear_betas(2000)).alphas_bar)
     g = torch.Generator().manual_seed(1)
     xt, x_end, x0_hat = (torch.randn(2, 5, 68, 3, generator=g, dtype=torch.float64) for _ in range(3))
@@ -111,6 +111,6 @@ def test_the_landing_error_is_the_x0_error_times_the_steps_conditioning():
         ratio = ((1 - a_end) / (1 - a)).sqrt()
         factor = a_end.sqrt() - ratio * a.sqrt()
         target = (x_end - ratio * xt) / factor
-        landed = _ddim_step(xt, x0_hat, a, a_end)
+        landed = ddim_step(xt, x0_hat, a, a_end)
         torch.testing.assert_close(x_end - landed, factor * (target - x0_hat))
     assert abs(factor) < 1e-3  # near T

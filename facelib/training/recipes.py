@@ -23,7 +23,7 @@ from torch import nn
 from .. import config, data, deformation, srvf
 from ..face import get_template
 from ..checkpoints import checkpoint_name
-from ..diffusion import GaussianDiffusion, halving_steps, named_betas
+from ..diffusion import GaussianDiffusion, ddim_step, halving_steps, named_betas
 from ..flow import RectifiedFlow
 from ..inpainting import FILL_SETTINGS, fill_masks
 from ..models import actor, lstm_filler, motion3dgan, motionclip
@@ -403,7 +403,7 @@ class DistillationRecipe(Recipe):
         a, a_next = (
             self.alphas_bar[s].to(x.dtype).reshape(-1, 1, 1, 1) for s in (t, t_next)
         )
-        return _ddim_step(x, network.x0(x, t.to(x.dtype)), a, a_next)
+        return ddim_step(x, network.x0(x, t.to(x.dtype)), a, a_next)
 
     def loss(self, model, draws):
         _, x0 = self.data.clean_batch(draws)
@@ -424,7 +424,7 @@ class DistillationRecipe(Recipe):
         if self.settings.weighting == "landing":
             # where the student's step lands, against the teacher's two, in units of
             # the noise there; the last step (to t'' = 0) lands on x_0 itself
-            landed = _ddim_step(xt, x0_hat, a, a_end)
+            landed = ddim_step(xt, x0_hat, a, a_end)
             scale = (1 - a_end).sqrt().clamp_min(1e-3)
             last = (t_end == 0).reshape(-1, 1, 1, 1)
             err = torch.where(
@@ -463,13 +463,6 @@ class DistillationRecipe(Recipe):
 
     def checkpoint_name(self):
         return f"student_{self.distilled_from}_{self.settings.teacher_steps // 2}"
-
-
-def _ddim_step(x, x0, a, a_next):
-    """DDIM (eta = 0) from noise level abar = a to a_next given the clean estimate x0:
-    sqrt(a_next) x0 + sqrt(1 - a_next) (x - sqrt(a) x0) / sqrt(1 - a)."""
-    eps = (x - a.sqrt() * x0) / (1 - a).sqrt()
-    return a_next.sqrt() * x0 + (1 - a_next).sqrt() * eps
 
 
 def _as_setting(value):
