@@ -192,7 +192,14 @@ def _animate(args):
     settings = _registration_settings(args)
     mesh = registration.read_mesh(args.mesh, settings.units)
     seconds = {"read mesh": time.perf_counter() - t0}
-    steps = config.GeometryAdaptive().steps if args.steps is None else args.steps
+    if args.fast and args.steps is not None:
+        raise ValueError(
+            f"--fast samples with the {config.FAST_STUDENT_STEPS}-step student; give"
+            " --fast or --steps, not both"
+        )
+    sampler = {"sampler": "student"} if args.fast else {}
+    steps = config.FAST_STUDENT_STEPS if args.fast else args.steps
+    steps = config.GeometryAdaptive().steps if steps is None else steps
     anim = pipeline.animate_mesh(
         mesh,
         args.label,
@@ -201,6 +208,7 @@ def _animate(args):
         steps=steps,
         seed=args.seed,
         progress=True,
+        **sampler,
     )
     seconds.update(anim.seconds)
     t0 = time.perf_counter()
@@ -577,6 +585,14 @@ def main(argv=None):
         help=(
             "reverse steps per pass of Alg. 4 (default: "
             "config.GeometryAdaptive: 100, the book's respaced chain)"
+        ),
+    )
+    p.add_argument(
+        "--fast",
+        action="store_true",
+        help=(
+            "sample with the distilled student of config.FAST_STUDENT_STEPS steps"
+            " (chapter 14) instead of the DDPM chain"
         ),
     )
     p.add_argument("--seed", type=int, default=0)

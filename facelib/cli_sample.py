@@ -36,7 +36,15 @@ FIELD_HELP = {
         "the DDPM sampler's sigma_t^2: beta_t (the paper's) or the posterior beta~_t"
         " ('none': the denoiser's own; DDIM's is eta^2 beta~_t)"
     ),
-    "sampler": "the reverse step: DDPM's ancestral step (Eq. 5) or DDIM's",
+    "spacing": (
+        "where a chain of K steps puts them: uniform (1, ..., T; the book's) or"
+        " trailing (T/K, ..., T; Lin et al. 2024)"
+    ),
+    "sampler": (
+        "the reverse step: DDPM's ancestral step (Eq. 5), DDIM's, a distilled"
+        " student's (--steps: one it was distilled for) or the rectified flow's"
+        " Euler step (chapter 14)"
+    ),
     "eta": "DDIM's noise, in [0, 1] (0: deterministic)",
     "guidance": (
         "classifier: a noisy classifier steers the unconditional denoiser (the"
@@ -112,6 +120,7 @@ TASK_HELP = {
 CHOICES = {
     "variance": ("beta", "posterior"),
     "sampler": config.SAMPLERS,
+    "spacing": config.SPACINGS,
     "dataset": data.DATASET_NAMES,
     "guidance": config.LABEL_GUIDANCE,
     "classifier_type": data.CLASSIFIER_TYPES,
@@ -597,14 +606,16 @@ def run(args):
         )
     settings, spec = settings_of(args), TASKS[args.task]
     cfg = getattr(settings, "guidance", None) == "cfg"
-    checkpoint = args.checkpoint or checkpoints.checkpoint_name(
-        "denoiser", settings.dataset, "cfg" if cfg else None
+    checkpoint = args.checkpoint or tasks.denoiser_name(
+        settings.dataset, settings.sampler, settings.steps, "cfg" if cfg else None
     )
     with checkpoints.recording() as used_checkpoints:
         if args.checkpoint is not None or not cfg:
             denoiser = tasks.load_denoiser(checkpoint)
         else:
-            denoiser = tasks.load_conditional_denoiser(settings.dataset)
+            denoiser = tasks.load_conditional_denoiser(
+                settings.dataset, settings.sampler, settings.steps
+            )
         denoiser.model.to(device_for(args.device))
         landmarks, extra = spec.run(args, settings, denoiser)
     if (args.task, "num_frames") in INTERNAL:  # the input's length

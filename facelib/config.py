@@ -312,6 +312,11 @@ class DistillationTraining(Optimisation):
     ema_decay: float | None = 0.999
     # ours: "landing" (DISTILLATION_WEIGHTINGS); theirs: "truncated_snr"
     weighting: str = "landing"
+    # a label-conditional DDPM teacher (denoiser_<dataset>_cfg): the classifier-free
+    # weight w distilled into the student, which then samples guided in one call per
+    # step (Meng et al. 2023, with one fixed w; None: CFG_SCALE); a student teacher
+    # carries its w already
+    guidance_scale: float | None = None
 
     def __post_init__(self):
         super().__post_init__()
@@ -327,6 +332,7 @@ class DistillationTraining(Optimisation):
                 f"unknown distillation weighting {self.weighting!r}; allowed:"
                 f" {', '.join(DISTILLATION_WEIGHTINGS)}"
             )
+        _check_number("guidance_scale", self.guidance_scale, allow_none=True)
 
     def fast(self):
         return replace(self, steps=20, warmup=5)
@@ -596,7 +602,19 @@ def _check_number(name, value, low=0.0, allow_none=False):
         )
 
 
-SAMPLERS = ("ddpm", "ddim")
+# "ddpm": the ancestral step of Eq. 5 (paper); "ddim": DDIM's step (Song et al. 2021);
+# "student": a progressively distilled student of the DDIM chain, on the steps it was
+# distilled for (Salimans & Ho 2022; checkpoints student_denoiser_<dataset>_<K>);
+# "flow": Euler's steps of the rectified flow (denoiser_<dataset>_flow); chapter 14
+SAMPLERS = ("ddpm", "ddim", "student", "flow")
+# the samplers whose chain is deterministic whatever eta (their models were made for it)
+DETERMINISTIC_SAMPLERS = ("student", "flow")
+# where a respaced chain of K steps puts them: "uniform" (steps 1 and T and evenly
+# between: Nichol & Dhariwal 2021, the book's), "trailing" (T/K, 2T/K, ..., T: Lin et
+# al. 2024, the distilled students' and the flow's)
+SPACINGS = ("uniform", "trailing")
+# `animate --fast`: the distilled student of this many steps (chapter 14)
+FAST_STUDENT_STEPS = 4
 
 
 @dataclass(frozen=True)
@@ -610,17 +628,19 @@ class Sampling:
     # the sampler's sigma_t^2: "beta" (paper §4), "posterior" (beta~_t); None: the
     # model's
     variance: str | None = None
-    # "ddpm": the ancestral step of Eq. 5 (paper); "ddim": DDIM's step (Song et al.
-    # 2021)
+    # one of SAMPLERS
     sampler: str = "ddpm"
     # DDIM only: sigma_t^2 = eta^2 beta~_t, in [0, 1] (0: deterministic; 1: the DDPM
     # posterior)
     eta: float = 0.0
+    # one of SPACINGS
+    spacing: str = "uniform"
 
     def __post_init__(self):
         if self.variance is not None:
             _check_choice("variance", self.variance, ("beta", "posterior"))
         _check_choice("sampler", self.sampler, SAMPLERS)
+        _check_choice("spacing", self.spacing, SPACINGS)
         if (
             isinstance(self.eta, bool)
             or not isinstance(self.eta, (int, float))
@@ -649,8 +669,10 @@ class Sampling:
 
     @property
     def ddim_eta(self):
-        """DDIM's eta when the sampler is DDIM, else None (GaussianDiffusion's
-        ``eta``)."""
+        """DDIM's eta when the sampler is DDIM, 0 for the deterministic samplers (a
+        student, the flow), else None (GaussianDiffusion's ``eta``)."""
+        if self.sampler in DETERMINISTIC_SAMPLERS:
+            return 0.0
         return self.eta if self.sampler == "ddim" else None
 
     def paper(self):
@@ -658,7 +680,8 @@ class Sampling:
         return replace(self, steps=None, variance="beta", sampler="ddpm", eta=0.0)
 
     def fast(self):
-        return replace(self, steps=20)
+        # a student samples on the steps it was distilled for, and only there
+        return self if self.sampler == "student" else replace(self, steps=20)
 
 
 @dataclass(frozen=True)

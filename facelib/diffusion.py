@@ -154,7 +154,24 @@ def _device_of(network):
     return None
 
 
-class TimeMapped(torch.nn.Module):
+class _Relabelled(torch.nn.Module):
+    """A network called as ``net(x, t, ...)``, ``net.log_prob``, ``net.embed`` or
+    ``net.cosine`` whose time argument is relabelled by ``self.time(t, x)`` first."""
+
+    def forward(self, x, t, *args, **kwargs):
+        return self.network(x, self.time(t, x), *args, **kwargs)
+
+    def log_prob(self, x, t, *args, **kwargs):
+        return self.network.log_prob(x, self.time(t, x), *args, **kwargs)
+
+    def embed(self, x, t, *args, **kwargs):
+        return self.network.embed(x, self.time(t, x), *args, **kwargs)
+
+    def cosine(self, x, t, *args, **kwargs):
+        return self.network.cosine(x, self.time(t, x), *args, **kwargs)
+
+
+class TimeMapped(_Relabelled):
     """A network seen through a (respaced) chain: called as ``net(x, t, ...)``,
     ``net.log_prob(x, t, ...)``, ``net.embed(x, t, ...)`` or ``net.cosine(x, t, ...)``
     with the chain's step t (an int or a (B,) tensor), it feeds the network its own time
@@ -180,17 +197,34 @@ class TimeMapped(torch.nn.Module):
         labels = self.timesteps[t.round().long()]
         return (labels.expand(len(x)) if labels.ndim == 0 else labels).to(x.device)
 
-    def forward(self, x, t, *args, **kwargs):
-        return self.network(x, self.time(t, x), *args, **kwargs)
 
-    def log_prob(self, x, t, *args, **kwargs):
-        return self.network.log_prob(x, self.time(t, x), *args, **kwargs)
+def named_alphas_bar(name, num_steps):
+    """abar_0 = 1, abar_1, ..., abar_T of a named schedule."""
+    return np.concatenate([[1.0], np.cumprod(1.0 - named_betas(name, num_steps))])
 
-    def embed(self, x, t, *args, **kwargs):
-        return self.network.embed(x, self.time(t, x), *args, **kwargs)
 
-    def cosine(self, x, t, *args, **kwargs):
-        return self.network.cosine(x, self.time(t, x), *args, **kwargs)
+class NoiseLevelMatched(_Relabelled):
+    """A network trained on one noise schedule, read on another: called with a time
+    label of the chain's schedule (abar ``chain_alphas_bar``, labels 0..T'), it feeds
+    the network the label of its own schedule (``own_alphas_bar``) at the same noise
+    level, log abar interpolated between steps.  The book's classifiers, trained on the
+    linear schedule, guide the rectified flow this way (chapter 14): the same label is
+    another noise level on each schedule.
+    """
+
+    def __init__(self, network, own_alphas_bar, chain_alphas_bar):
+        super().__init__()
+        self.network = network
+        # log abar, increasing, against the labels, for np.interp
+        self.own = np.log(np.asarray(own_alphas_bar, dtype=np.float64))[::-1]
+        self.chain = np.log(np.asarray(chain_alphas_bar, dtype=np.float64))
+
+    def time(self, t, x):
+        t = torch.as_tensor(t, dtype=torch.float64).cpu().numpy()
+        level = np.interp(t, np.arange(len(self.chain)), self.chain)
+        labels = np.interp(level, self.own, np.arange(len(self.own))[::-1])
+        labels = torch.as_tensor(labels, dtype=torch.float32)
+        return (labels.expand(len(x)) if labels.ndim == 0 else labels).to(x.device)
 
 
 class GaussianDiffusion:
@@ -655,8 +689,10 @@ class GaussianDiffusion:
         if isinstance(steps, (int, np.integer)) and not isinstance(steps, bool):
             if not 1 <= steps <= self.num_steps:
                 raise ValueError(f"respace to 1..{self.num_steps} steps, got {steps}")
+            # one step starts from pure noise, at T
+            first = self.num_steps if steps == 1 else 1
             kept = np.unique(
-                np.round(np.linspace(1, self.num_steps, steps)).astype(int)
+                np.round(np.linspace(first, self.num_steps, steps)).astype(int)
             )
         else:
             kept = np.unique(np.asarray(steps, dtype=int))

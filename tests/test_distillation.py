@@ -80,8 +80,10 @@ def test_bad_distillation_settings_are_refused():
         config.DistillationTraining(teacher_steps=7)
     with pytest.raises(ValueError, match="unknown distillation weighting 'x'; allowed: landing, truncated_snr, snr"):
         config.DistillationTraining(weighting="x")
-    with pytest.raises(ValueError, match="unconditional DDPM denoiser"):
-        training.DistillationRecipe(config.DistillationTraining(teacher="denoiser_coma_cfg"))
+    with pytest.raises(ValueError, match="not a rectified flow"):
+        training.DistillationRecipe(config.DistillationTraining(teacher="denoiser_coma_flow"))
+    with pytest.raises(ValueError, match="denoiser_coma is unconditional, it has no classifier-free guidance"):
+        training.DistillationRecipe(config.DistillationTraining(guidance_scale=2.0))
 
 
 def test_a_student_samples_on_its_own_steps_and_refuses_others(tmp_path):
@@ -114,3 +116,33 @@ def test_the_landing_error_is_the_x0_error_times_the_steps_conditioning():
         landed = ddim_step(xt, x0_hat, a, a_end)
         torch.testing.assert_close(x_end - landed, factor * (target - x0_hat))
     assert abs(factor) < 1e-3  # near T
+
+
+def test_a_student_of_the_conditional_denoiser_samples_with_the_guidance_weight_distilled_in(tmp_path):
+    """Meng et al. 2023 with one w: the first round's teacher is CFG-guided, the student
+    samples guided in one call a step, and its own students keep its w."""
+    r = training.DistillationRecipe(config.DistillationTraining(
+        teacher="denoiser_coma_cfg", teacher_steps=8, batch_size=4).with_steps(1))
+    assert r.guidance_scale == config.CFG_SCALE
+    x, t = torch.randn(2, 40, 68, 3), torch.full((2,), 900.0)
+    y = torch.tensor([0, 5])
+    with torch.no_grad():
+        free, cond = r.teacher.model.x0(x, t), r.teacher.model.x0(x, t, labels=y)
+        torch.testing.assert_close(r.teacher_x0(x, t, y), free + 2.5 * (cond - free))
+    training.train_and_save(r, name=str(tmp_path / "c4"), progress=False)
+    student = tasks.load_denoiser(str(tmp_path / "c4"))
+    assert student.meta["training"]["cfg_scale"] == 2.5 and student.model.config.num_classes
+    out = tasks.label_control("high_smile", 2, steps=4, sampler="student", guidance="cfg",
+                              denoiser=student, progress=False)
+    assert out.shape == (2, 40, 68, 3) and np.isfinite(out).all()
+    with pytest.raises(ValueError, match="samples with w = 2.5 distilled in, not scale = 4"):
+        tasks.label_control("high_smile", 2, steps=4, sampler="student", guidance="cfg",
+                            scale=4.0, denoiser=student, progress=False)
+    nxt = training.DistillationRecipe(config.DistillationTraining(
+        teacher=str(tmp_path / "c4"), teacher_steps=4, batch_size=4).with_steps(1))
+    assert nxt.guidance_scale == 2.5 and nxt.checkpoint_name() == "student_denoiser_coma_cfg_2"
+    with torch.no_grad():  # a guided student's estimate is used as it is
+        torch.testing.assert_close(nxt.teacher_x0(x, t, y), student.model.x0(x, t, labels=y))
+    with pytest.raises(ValueError, match="keep it"):
+        training.DistillationRecipe(config.DistillationTraining(
+            teacher=str(tmp_path / "c4"), teacher_steps=4, guidance_scale=1.0))

@@ -150,3 +150,75 @@ def test_bad_flow_input_is_refused():
         config.DenoiserTraining(schedule="flow")
     with pytest.raises(ValueError, match="not the flow's"):
         config.DenoiserTraining(schedule="flow", prediction="u", min_snr_gamma=5.0)
+
+
+def test_a_flow_denoisers_chain_of_k_steps_is_eulers_uniform_grid():
+    from facelib.tasks import TrainedDenoiser, load_denoiser
+    ref = load_denoiser("denoiser_coma")
+    flow = TrainedDenoiser(small(), ref.normalizer,
+                           GaussianDiffusion(named_betas("flow", T)),
+                           {"training": {"num_diffusion_steps": T, "schedule": "flow",
+                                         "dataset": "coma"}, "name": "a small flow"})
+    for k in (1, 4, 7):
+        grid = RectifiedFlow(T).times(k).numpy() * T
+        np.testing.assert_allclose(flow.diffusion_with(k, eta=0.0).timesteps[::-1], grid, atol=0.5)
+    # the linear model keeps its own respacing unless told to trail
+    assert ref.diffusion_with(4).timesteps.tolist() == [0, 1, 667, 1334, 2000]
+    assert ref.diffusion_with(4, spacing="trailing").timesteps.tolist() == [0, 500, 1000, 1500, 2000]
+    assert ref.diffusion_with(1).timesteps.tolist() == [0, 2000]  # one step starts at T
+    with pytest.raises(ValueError, match="unknown spacing 'leading'; allowed: uniform, trailing"):
+        ref.diffusion_with(4, spacing="leading")
+    with pytest.raises(ValueError, match="spacing must be one of"):
+        config.Unconditional(spacing="leading")
+
+
+def test_a_guide_of_another_schedule_reads_the_chains_noise_level():
+    from facelib.diffusion import NoiseLevelMatched, named_alphas_bar
+    seen = []
+    net = lambda x, t: seen.append(t) or x.sum()
+    linear, flow = named_alphas_bar("linear", T), named_alphas_bar("flow", T)
+    same = NoiseLevelMatched(net, linear, linear)
+    same(torch.zeros(3, 1), torch.tensor([1.0, 700.0, 1999.0]))
+    np.testing.assert_allclose(seen[-1].numpy(), [1, 700, 1999], atol=1e-3)
+    matched = NoiseLevelMatched(net, linear, flow)
+    t = torch.tensor([20.0, 500.0, 1000.0, 1500.0])
+    matched(torch.zeros(4, 1), t)
+    # the linear schedule's abar at the label it was given is the flow's abar at t
+    ab_lin = np.interp(seen[-1].numpy(), np.arange(T + 1), linear)
+    np.testing.assert_allclose(ab_lin, flow_alphas_bar(t.numpy() / T), rtol=0.02)
+
+
+def test_label_control_guides_the_flow_with_the_linear_schedules_classifier():
+    from facelib import tasks
+    from facelib.diffusion import NoiseLevelMatched
+    ref, guide = tasks.load_denoiser("denoiser_coma"), tasks.load_guide("coma")
+    flow = tasks.TrainedDenoiser(small(), ref.normalizer,
+                                 GaussianDiffusion(named_betas("flow", T)),
+                                 {"training": {"num_diffusion_steps": T, "schedule": "flow",
+                                               "dataset": "coma"}, "name": "a small flow"})
+    settings = config.LabelControl(steps=4, sampler="flow")
+    _, chain, matched = tasks.loading.guided_chain(guide, flow, settings)
+    assert isinstance(matched.model, NoiseLevelMatched) and chain.eta == 0.0
+    _, _, same = tasks.loading.guided_chain(guide, ref, settings)
+    assert same is guide  # its own schedule: unchanged
+    x = tasks.label_control("high_smile", 2, steps=4, sampler="flow", denoiser=flow,
+                            guide=guide, progress=False)
+    assert x.shape == (2, 40, 68, 3) and np.isfinite(x).all()
+
+
+def test_the_sampler_names_the_denoiser_it_runs_and_refuses_what_is_not_shipped(monkeypatch):
+    from facelib import tasks
+    monkeypatch.setattr(tasks.loading, "shipped_students", lambda dataset: [1, 4])
+    assert tasks.denoiser_name("coma", "ddim") == "denoiser_coma"
+    assert tasks.denoiser_name("coma", "ddpm", variant="cfg") == "denoiser_coma_cfg"
+    assert tasks.denoiser_name("coma", "flow") == "denoiser_coma_flow"
+    assert tasks.denoiser_name("coma", "student", 4) == "student_denoiser_coma_4"
+    with pytest.raises(ValueError, match="no student of coma distilled for steps=50; the shipped students take 1, 4 steps"):
+        tasks.denoiser_name("coma", "student", 50)
+    with pytest.raises(ValueError, match="the flow sampler has no 'cfg' denoiser"):
+        tasks.denoiser_name("coma", "flow", variant="cfg")
+    with pytest.raises(ValueError, match="unknown sampler 'x'; allowed: ddpm, ddim, student, flow"):
+        tasks.denoiser_name("coma", "x")
+    s = config.Unconditional(sampler="student", steps=4)
+    assert s.fast().steps == 4 and s.ddim_eta == 0.0
+    assert config.Unconditional(sampler="flow").fast().steps == 20

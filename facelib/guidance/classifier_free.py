@@ -41,6 +41,8 @@ class ClassifierFree(nn.Module):
         )
 
     def forward(self, xt, t, mask=None):
+        if self.scale == 1:  # free + (conditional - free): one call
+            return self.denoiser(xt, t, mask, labels=self.labels)
         free = self.denoiser(xt, t, mask)
         if self.scale == 0:
             return free

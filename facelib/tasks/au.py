@@ -171,7 +171,7 @@ def au_control(
         np.stack,
         zip(*(requested_curves(c, settings.num_frames, ranges) for c in per_sequence)),
     )
-    denoiser, diffusion = guided_chain(regressor, denoiser, settings)
+    denoiser, diffusion, regressor = guided_chain(regressor, denoiser, settings)
     reader = (
         dict(denoiser=denoiser.model, diffusion=diffusion)
         if settings.read == "x0_hat"

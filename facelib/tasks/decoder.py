@@ -7,10 +7,9 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from ..checkpoints import checkpoint_name
 from ..baselines import generate_from_text, load_baseline
 from ..config import DecoderThenDiffusion
-from .loading import load_denoiser, task_settings
+from .loading import denoiser_name, load_denoiser, task_settings
 from .text import text_list
 
 
@@ -34,15 +33,15 @@ def decoder_then_diffusion(
     settings, shape = task_settings(settings, overrides, n)
     texts, dataset = text_list(text, n), settings.dataset
     decoder = decoder or load_baseline("motionclip", dataset)
-    denoiser = denoiser or load_denoiser(checkpoint_name("denoiser", dataset))
+    denoiser = denoiser or load_denoiser(
+        denoiser_name(dataset, settings.sampler, settings.steps)
+    )
     if denoiser.meta["training"]["dataset"] != dataset:
         raise ValueError(
             f"the denoiser was trained on {denoiser.meta['training']['dataset']!r}, the"
             f" decoder's sequences are of {dataset!r}: use denoiser_{dataset}"
         )
-    diffusion = denoiser.diffusion_with(
-        settings.steps, settings.variance, settings.ddim_eta
-    )
+    diffusion = denoiser.chain_for(settings)
     last = denoiser.diffusion.num_steps
     if not 1 <= settings.start <= last:
         raise ValueError(f"start must be a step in 1..{last}, got {settings.start!r}")

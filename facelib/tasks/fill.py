@@ -5,12 +5,11 @@ from __future__ import annotations
 
 import torch
 
-from ..checkpoints import checkpoint_name
 from ..config import Fill, with_overrides
 from ..face.sequences import check_num_frames
 from ..guidance import ReconstructionGuidance
 from ..inpainting import KnownFrames, check_fill_input, keep_known
-from .loading import load_denoiser
+from .loading import denoiser_name, load_denoiser
 
 
 def known_noise(seed):
@@ -40,10 +39,10 @@ def fill(
     settings = with_overrides(settings, overrides)
     x, mask = check_fill_input(sequences, known)
     check_num_frames(x.shape[1])
-    denoiser = denoiser or load_denoiser(checkpoint_name("denoiser", settings.dataset))
-    diffusion = denoiser.diffusion_with(
-        settings.steps, settings.variance, settings.ddim_eta
+    denoiser = denoiser or load_denoiser(
+        denoiser_name(settings.dataset, settings.sampler, settings.steps)
     )
+    diffusion = denoiser.chain_for(settings)
     x0, mask_t = denoiser.to_model(x), torch.as_tensor(mask).to(denoiser.device)
     reconstruction = (
         ReconstructionGuidance(

@@ -116,7 +116,7 @@ def geometry_passes(
             " N2E/E2N)"
         )
     targets = guide.class_indices(names)
-    denoiser, diffusion = guided_chain(guide, denoiser, settings)
+    denoiser, diffusion, guide = guided_chain(guide, denoiser, settings)
     restart = (
         diffusion.num_steps
         if settings.renoise_step is None

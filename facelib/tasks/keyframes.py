@@ -25,12 +25,11 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from ..checkpoints import checkpoint_name
 from ..config import NUM_FRAMES, NUM_LANDMARKS, KEYFRAME_TOLERANCE, Keyframes
 from ..guidance import ReconstructionGuidance
 from ..inpainting import LANDMARK_LIMIT_MM, KnownFrames, landmark_array, neutral_faces
 from .fill import known_noise
-from .loading import load_denoiser, task_settings
+from .loading import denoiser_name, load_denoiser, task_settings
 
 KEY_FIELDS = ("frame", "landmark")
 KEY_TARGETS = ("position", "displacement")
@@ -152,10 +151,10 @@ def keyframes(
     settings, shape = task_settings(settings, overrides, n)
     neutral = None if neutral is None else check_neutral(neutral)
     given, mask = check_keys(keys, shape[1], neutral)
-    denoiser = denoiser or load_denoiser(checkpoint_name("denoiser", settings.dataset))
-    diffusion = denoiser.diffusion_with(
-        settings.steps, settings.variance, settings.ddim_eta
+    denoiser = denoiser or load_denoiser(
+        denoiser_name(settings.dataset, settings.sampler, settings.steps)
     )
+    diffusion = denoiser.chain_for(settings)
     x0 = denoiser.to_model(np.broadcast_to(given, shape))
     known = torch.as_tensor(np.broadcast_to(mask, shape[:3]).copy()).to(denoiser.device)
     guide = None

@@ -4,7 +4,6 @@ denoiser."""
 
 from __future__ import annotations
 
-from ..checkpoints import checkpoint_name
 from ..config import NUM_DIFFUSION_STEPS, ADAGRAD_LR, LR_REFERENCE_STEPS, LabelControl
 from ..guidance import (
     ClassifierFree,
@@ -12,7 +11,13 @@ from ..guidance import (
     MeanShiftGuidance,
     OptimisationGuidance,
 )
-from .loading import guided_chain, load_denoiser, load_guide, task_settings
+from .loading import (
+    denoiser_name,
+    guided_chain,
+    load_denoiser,
+    load_guide,
+    task_settings,
+)
 
 
 def step_scaled_lr(
@@ -90,10 +95,11 @@ def check_labels(label, n):
     return labels
 
 
-def load_conditional_denoiser(dataset):
+def load_conditional_denoiser(dataset, sampler="ddpm", steps=None):
     """denoiser_<dataset>_cfg, the label-conditional denoiser of classifier-free
-    guidance (an error naming the command that trains it when it is missing)."""
-    name = checkpoint_name("denoiser", dataset, "cfg")
+    guidance, or the sampler's (its student of ``steps`` steps, w distilled in); an
+    error naming the command that trains it when it is missing."""
+    name = denoiser_name(dataset, sampler, steps, variant="cfg")
     try:
         return load_denoiser(name)
     except FileNotFoundError:
@@ -102,6 +108,22 @@ def load_conditional_denoiser(dataset):
             " train it with `python -m facelib train denoiser --conditional --dataset"
             f" {dataset}`"
         ) from None
+
+
+def distilled_scale(denoiser, scale=None):
+    """1 (its conditional output, one call a step) for a student with classifier-free
+    guidance distilled in (a clear error when another weight is asked of it); None for
+    any other denoiser."""
+    distilled = denoiser.meta.get("training", {}).get("cfg_scale")
+    if distilled is None:
+        return None
+    if scale not in (None, distilled):
+        raise ValueError(
+            f"{denoiser.meta.get('name', 'this student')} samples with w = {distilled}"
+            f" distilled in, not scale = {scale} (give scale None, or use sampler"
+            " 'ddim' with denoiser_<dataset>_cfg)"
+        )
+    return 1.0
 
 
 def label_sampler(labels, settings, denoiser=None, guide=None):
@@ -113,21 +135,23 @@ def label_sampler(labels, settings, denoiser=None, guide=None):
     inside :class:`ClassifierFree`, no hook.
     """
     if settings.guidance == "cfg":
-        denoiser = denoiser or load_conditional_denoiser(settings.dataset)
+        denoiser = denoiser or load_conditional_denoiser(
+            settings.dataset, settings.sampler, settings.steps
+        )
         model = ClassifierFree(
-            denoiser.model, denoiser.class_indices(labels), settings.guidance_scale
+            denoiser.model,
+            denoiser.class_indices(labels),
+            distilled_scale(denoiser, settings.scale) or settings.guidance_scale,
         )
         return (
             denoiser,
-            denoiser.diffusion_with(
-                settings.steps, settings.variance, settings.ddim_eta
-            ),
+            denoiser.chain_for(settings),
             model,
             None,
         )
     guide = guide or load_guide(settings.dataset, settings.classifier_type)
+    denoiser, diffusion, guide = guided_chain(guide, denoiser, settings)
     score = ClassifierScore(guide.model, guide.class_indices(labels))
-    denoiser, diffusion = guided_chain(guide, denoiser, settings)
     if settings.guidance_method == "adagrad":
         lr = settings.lr
         if lr is None:

@@ -14,9 +14,22 @@ import torch
 
 from .. import data
 from ..checkpoints import checkpoint_name, load_checkpoint
-from ..config import NUM_LANDMARKS, TEXT_DATASET, with_overrides
+from ..config import (
+    CHECKPOINT_DIR,
+    NUM_LANDMARKS,
+    SAMPLERS,
+    SPACINGS,
+    TEXT_DATASET,
+    with_overrides,
+)
 from ..data import LandmarkNormalizer
-from ..diffusion import GaussianDiffusion, named_betas
+from ..diffusion import (
+    GaussianDiffusion,
+    NoiseLevelMatched,
+    halving_steps,
+    named_alphas_bar,
+    named_betas,
+)
 from ..face.sequences import check_num_frames
 from ..face.aus import AU_NAMES
 from ..models.au_regressor import AURegressor, AURegressorConfig
@@ -71,12 +84,19 @@ class TrainedDenoiser:
             )
         return [names.index(y) for y in labels]
 
-    def diffusion_with(self, steps=None, variance=None, eta=None):
+    def diffusion_with(self, steps=None, variance=None, eta=None, spacing="uniform"):
         """The full T-step diffusion (steps=None) or a respaced one with ``steps``
-        steps; ``variance`` ("beta", "posterior") replaces the sampler's sigma_t^2
-        (None: the denoiser's own); ``eta`` samples by DDIM.  A distilled student
-        samples deterministically on the steps it was distilled for, and only there.
+        steps, placed by ``spacing`` ("uniform": steps 1 and T and evenly between, as
+        Nichol & Dhariwal; "trailing": T/K, 2T/K, ..., T, Lin et al. 2024; the flow's
+        are always trailing, its Euler grid); ``variance`` ("beta", "posterior")
+        replaces the sampler's sigma_t^2 (None: the denoiser's own); ``eta`` samples by
+        DDIM.  A distilled student samples deterministically on the steps it was
+        distilled for, and only there.
         """
+        if spacing not in SPACINGS:
+            raise ValueError(
+                f"unknown spacing {spacing!r}; allowed: {', '.join(SPACINGS)}"
+            )
         student_steps = self.meta.get("training", {}).get("sampler_steps")
         if student_steps is not None:
             if steps not in (None, len(student_steps)) or eta not in (None, 0):
@@ -90,12 +110,60 @@ class TrainedDenoiser:
         diffusion = self.diffusion
         if variance is not None and variance != diffusion.variance:
             diffusion = GaussianDiffusion(diffusion.betas[1:], variance)
-        diffusion = (
-            diffusion
-            if steps is None or steps == diffusion.num_steps
-            else diffusion.respace(steps)
-        )
+        if steps is not None and steps != diffusion.num_steps:
+            flow = self.model.config.schedule == "flow"
+            diffusion = diffusion.respace(
+                halving_steps(steps, diffusion.num_steps)[1:]
+                if flow or spacing == "trailing"
+                else steps
+            )
         return diffusion if eta is None else diffusion.with_eta(eta)
+
+    def chain_for(self, settings):
+        """The chain of a task's settings (config.Sampling: steps, variance, sampler,
+        spacing)."""
+        return self.diffusion_with(
+            settings.steps, settings.variance, settings.ddim_eta, settings.spacing
+        )
+
+
+def shipped_students(dataset, variant=None):
+    """The step counts K of the distilled students student_denoiser_<dataset>_<K> (of
+    denoiser_<dataset>_<variant>: student_denoiser_<dataset>_cfg_<K>, classifier-free
+    guidance distilled in) in data/checkpoints, ascending."""
+    prefix = f"student_{checkpoint_name('denoiser', dataset, variant)}_"
+    return sorted(
+        int(path.stem[len(prefix) :])
+        for path in CHECKPOINT_DIR.glob(prefix + "*.pt")
+        if path.stem[len(prefix) :].isdigit()
+    )
+
+
+def denoiser_name(dataset, sampler="ddpm", steps=None, variant=None):
+    """The denoiser checkpoint a sampler runs: denoiser_<dataset>[_<variant>] for DDPM
+    and DDIM, the student student_denoiser_<dataset>[_<variant>]_<steps> (distilled for
+    exactly these steps), the rectified flow denoiser_<dataset>_flow."""
+    if sampler not in SAMPLERS:
+        raise ValueError(f"unknown sampler {sampler!r}; allowed: {', '.join(SAMPLERS)}")
+    if sampler in ("ddpm", "ddim"):
+        return checkpoint_name("denoiser", dataset, variant)
+    if sampler == "flow":
+        if variant is not None:
+            raise ValueError(
+                f"the flow sampler has no {variant!r} denoiser: only the unconditional"
+                f" denoiser_{dataset}_flow was trained (use classifier guidance, or"
+                " sampler 'ddim')"
+            )
+        return checkpoint_name("denoiser", dataset, "flow")
+    teacher = checkpoint_name("denoiser", dataset, variant)
+    shipped = shipped_students(dataset, variant)
+    if steps not in shipped:
+        raise ValueError(
+            f"no student of {teacher} distilled for steps={steps}; the shipped"
+            f" students take {', '.join(map(str, shipped)) or 'no'} steps (train"
+            " another with `python -m facelib train student`)"
+        )
+    return f"student_{teacher}_{steps}"
 
 
 def load_denoiser(name="denoiser_coma", variance="beta"):
@@ -259,8 +327,8 @@ def load_au_regressor(dataset="coma", name=None):
 
 
 def check_same_space(denoiser, guide):
-    """The classifier must read x_t in the denoiser's normalised space and on its
-    schedule."""
+    """The classifier must read x_t in the denoiser's normalised space (its schedule
+    may differ: :func:`guided_chain` matches the noise levels)."""
     a, b = denoiser.normalizer, guide.normalizer
     if abs(a.scale - b.scale) > 1e-6 * a.scale or not np.allclose(
         a.mean_shape, b.mean_shape, atol=1e-4
@@ -270,20 +338,37 @@ def check_same_space(denoiser, guide):
             f" ({denoiser.meta['training']['dataset']}) normalise landmarks"
             " differently: train them on the same dataset"
         )
-    if guide.meta["training"]["num_diffusion_steps"] != denoiser.diffusion.num_steps:
-        raise ValueError(
-            "guidance classifier and denoiser use different diffusion schedules"
-        )
+
+
+def schedule_of(trained):
+    """(T, noise schedule) a trained network reads x_t on (its recorded training)."""
+    training = trained.meta["training"]
+    return training["num_diffusion_steps"], training.get("schedule", "linear")
 
 
 def guided_chain(guide, denoiser, settings):
     """The denoiser of the guide's dataset (or the given one, checked to share the
-    guide's space) and its chain for the task's settings (steps, variance, sampler)."""
-    denoiser = denoiser or load_denoiser(checkpoint_name("denoiser", guide.dataset))
+    guide's space), its chain for the task's settings (steps, variance, sampler), and
+    the guide reading that chain's noise levels: unchanged on its own schedule, else its
+    network NoiseLevelMatched (the same time label is another noise level on another
+    schedule: the rectified flow's, chapter 14)."""
+    denoiser = denoiser or load_denoiser(
+        denoiser_name(guide.dataset, settings.sampler, settings.steps)
+    )
     check_same_space(denoiser, guide)
     guide.model.to(denoiser.device)
-    return denoiser, denoiser.diffusion_with(
-        settings.steps, settings.variance, settings.ddim_eta
+    own, chain = schedule_of(guide), schedule_of(denoiser)
+    if own != chain:
+        matched = NoiseLevelMatched(
+            guide.model,
+            named_alphas_bar(own[1], own[0]),
+            named_alphas_bar(chain[1], chain[0]),
+        )
+        guide = dataclasses.replace(guide, model=matched)
+    return (
+        denoiser,
+        denoiser.chain_for(settings),
+        guide,
     )
 
 

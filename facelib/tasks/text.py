@@ -128,7 +128,7 @@ def text_control(
         raise ValueError(
             "text control needs a text head (load_text_head), not a label classifier"
         )
-    denoiser, diffusion = guided_chain(head, denoiser, settings)
+    denoiser, diffusion, head = guided_chain(head, denoiser, settings)
     score = text_score(settings, head, denoiser, embeddings)
     weight = (
         text_guidance_weight(settings.score)

@@ -2,9 +2,8 @@
 
 from __future__ import annotations
 
-from ..checkpoints import checkpoint_name
 from ..config import Unconditional
-from .loading import load_denoiser, task_settings
+from .loading import denoiser_name, load_denoiser, task_settings
 
 
 def unconditional(
@@ -23,10 +22,10 @@ def unconditional(
     e.g. ``steps=100``.
     """
     settings, shape = task_settings(settings, overrides, n)
-    denoiser = denoiser or load_denoiser(checkpoint_name("denoiser", settings.dataset))
-    diffusion = denoiser.diffusion_with(
-        settings.steps, settings.variance, settings.ddim_eta
+    denoiser = denoiser or load_denoiser(
+        denoiser_name(settings.dataset, settings.sampler, settings.steps)
     )
+    diffusion = denoiser.chain_for(settings)
     x = diffusion.sample(
         denoiser.model, shape, seed=settings.seed, progress=progress, callback=callback
     )

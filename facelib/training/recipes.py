@@ -344,8 +344,13 @@ class DistillationRecipe(Recipe):
         x0~ = (x_t'' - (sigma_t'' / sigma_t) x_t) / (alpha_t'' - (sigma_t'' / sigma_t)
         alpha_t),
 
-    with alpha = sqrt(abar), sigma = sqrt(1 - abar).  The loss is w_t ||x0~ -
-    x0_hat||^2, w_t = max(SNR_t, 1).
+    with alpha = sqrt(abar), sigma = sqrt(1 - abar).  Salimans & Ho's loss is w_t ||x0~
+    - x0_hat||^2, w_t = max(SNR_t, 1) (weighting "truncated_snr"); near T the
+    denominator above is about 3e-4 on the linear schedule and the target explodes, so
+    the book's default ("landing") measures where the student's step lands against the
+    teacher's two, in units of the noise there: ||(x_t'' - DDIM(x_t, x0_hat)) /
+    sigma_t''||^2 (on the last step, to t'' = 0, the x_0 error weighted as Salimans &
+    Ho's).
     """
 
     kind = "denoiser"
@@ -370,11 +375,12 @@ class DistillationRecipe(Recipe):
             "distilled_from", Path(settings.teacher).name
         )
         t = self.teacher.model.config
-        if t.schedule == "flow" or t.num_classes:
+        if t.schedule == "flow":
             raise ValueError(
-                f"{settings.teacher}: distillation takes an unconditional DDPM denoiser"
-                " (or a student of one)"
+                f"{settings.teacher}: distillation takes a DDPM denoiser (or a student"
+                " of one), not a rectified flow"
             )
+        self.guidance_scale = self._guidance_scale(t, recorded)
         self.architecture = model_config or replace(t, prediction="v")
         self.name = (
             f"student of {settings.teacher} ({settings.teacher_steps // 2} steps)"
@@ -384,6 +390,42 @@ class DistillationRecipe(Recipe):
             halving_steps(settings.teacher_steps, t.num_diffusion_steps)
         )
         self.alphas_bar = torch.as_tensor(self.data.diffusion.alphas_bar)
+
+    def _guidance_scale(self, teacher, recorded):
+        """The classifier-free weight w the students of a label-conditional teacher
+        sample with (None for an unconditional one): the settings' (or CFG_SCALE) for
+        the DDPM teacher, the one recorded for a student teacher."""
+        given, inherited = self.settings.guidance_scale, recorded.get("cfg_scale")
+        if not teacher.num_classes:
+            if given is not None:
+                raise ValueError(
+                    f"guidance_scale = {given}: {self.settings.teacher} is"
+                    " unconditional, it has no classifier-free guidance to distil"
+                )
+            return None
+        if "distillation" not in recorded:
+            return config.CFG_SCALE if given is None else float(given)
+        if given not in (None, inherited):
+            raise ValueError(
+                f"{self.settings.teacher} samples with w = {inherited} distilled in;"
+                f" its students keep it (guidance_scale None or {inherited}, not"
+                f" {given})"
+            )
+        return inherited
+
+    def teacher_x0(self, x, t, labels):
+        """The teacher's clean estimate: classifier-free guided by w, free + w
+        (conditional - free) (x_0 is affine in eps at fixed x_t, t, so this is CFG's
+        eps), for the DDPM teacher of a guided student; the plain estimate
+        otherwise."""
+        network = self.teacher.model
+        if labels is None:
+            return network.x0(x, t)
+        conditional = network.x0(x, t, labels=labels)
+        if "distillation" in self.teacher.meta["training"]:
+            return conditional  # a guided student: w is in already
+        free = network.x0(x, t)
+        return free + self.guidance_scale * (conditional - free)
 
     def build(self, generator):
         model = Denoiser(self.architecture)
@@ -398,15 +440,17 @@ class DistillationRecipe(Recipe):
         self.data.to(device)
         return self
 
-    def _ddim(self, network, x, t, t_next):
-        """One deterministic DDIM step of ``network`` from steps t to t_next (B,)."""
+    def _ddim(self, x0_of, x, t, t_next, labels=None):
+        """One deterministic DDIM step from steps t to t_next (B,) with the clean
+        estimate ``x0_of(x, t, labels)``."""
         a, a_next = (
             self.alphas_bar[s].to(x.dtype).reshape(-1, 1, 1, 1) for s in (t, t_next)
         )
-        return ddim_step(x, network.x0(x, t.to(x.dtype)), a, a_next)
+        return ddim_step(x, x0_of(x, t.to(x.dtype), labels), a, a_next)
 
     def loss(self, model, draws):
-        _, x0 = self.data.clean_batch(draws)
+        idx, x0 = self.data.clean_batch(draws)
+        labels = self.data.labels[idx] if self.architecture.num_classes else None
         j = draws.randint(1, self.settings.teacher_steps // 2 + 1)
         t, t_mid, t_end = self.grid[2 * j], self.grid[2 * j - 1], self.grid[2 * j - 2]
         a, a_end = (
@@ -415,11 +459,11 @@ class DistillationRecipe(Recipe):
         eps = draws.randn(*x0.shape[1:])
         xt = a.sqrt() * x0 + (1 - a).sqrt() * eps
         with torch.no_grad():
-            teacher = self.teacher.model
-            x_end = self._ddim(teacher, self._ddim(teacher, xt, t, t_mid), t_mid, t_end)
+            x_mid = self._ddim(self.teacher_x0, xt, t, t_mid, labels)
+            x_end = self._ddim(self.teacher_x0, x_mid, t_mid, t_end, labels)
             ratio = ((1 - a_end) / (1 - a)).sqrt()
             target = (x_end - ratio * xt) / (a_end.sqrt() - ratio * a.sqrt())
-        x0_hat = model.x0(xt, t.to(xt.dtype))
+        x0_hat = model.x0(xt, t.to(xt.dtype), labels=labels)
         snr = a / (1 - a)
         if self.settings.weighting == "landing":
             # where the student's step lands, against the teacher's two, in units of
@@ -447,6 +491,8 @@ class DistillationRecipe(Recipe):
             "prediction": model.config.prediction,
             "distilled_from": self.distilled_from,
             "distillation": asdict(self.settings),
+            # the classifier-free weight a guided student samples with (None: none)
+            "cfg_scale": self.guidance_scale,
             "sampler_steps": (
                 halving_steps(
                     self.settings.teacher_steps // 2, model.config.num_diffusion_steps
@@ -454,8 +500,10 @@ class DistillationRecipe(Recipe):
             ),
             "model": asdict(model.config),
         }
+        names = self.teacher.meta.get("class_names")
         return {
             "training": training,
+            **({"class_names": names} if names else {}),
             "normalizer": self.teacher.meta["normalizer"],
             "torch_version": torch.__version__,
             "data_dir": str(config.SYNTHETIC_DIR.name),
