@@ -19,6 +19,14 @@ The first row is the physical floor: one forward pass of the network.
 DDPM and DDIM run on trailing steps (T/K, 2T/K, ..., T: the students' and the flow's
 grid; Lin et al. 2024); the rows "DDIM, uniform" show the book's uniform spacing.
 --rows runs some row groups; with --save their rows replace those of the stored table.
+
+--experiment tasks: each guided task with its book defaults, then at 50 and 4 steps of
+DDIM, with the 4-step student and with the flow's Euler steps (4, 16): label control
+(the mean shift; IC accuracy, FID), filling FFM (Alg. 3 with reconstruction guidance; IC
+accuracy of the completed test sequences, error on the missing frames), geometry-
+adaptive generation (Alg. 4; type-S IC accuracy, distance of the known frame from the
+given face), keyframes (share met within 0.5 mm and smoothly, mean key error), each
+with a 95 % bootstrap interval (--task-n sequences per row; --save few_steps_tasks).
 """
 
 import argparse
@@ -186,8 +194,126 @@ def run_rows(args, ev):
     return rows
 
 
+# the guided tasks' samplers: (row name, settings changed; {}: the task's defaults)
+TASK_SAMPLERS = [
+    ("the book's default", {}),
+    ("DDIM, 50 steps", dict(sampler="ddim", steps=50, spacing="trailing")),
+    ("DDIM, 4 steps", dict(sampler="ddim", steps=4, spacing="trailing")),
+    ("student, 4 steps", dict(sampler="student", steps=4)),
+    ("flow, Euler 4 steps", dict(sampler="flow", steps=4)),
+    ("flow, Euler 16 steps", dict(sampler="flow", steps=16)),
+]
+TASK_COLUMNS = [
+    "task",
+    "sampler",
+    "measure",
+    "value",
+    "95 % interval",
+    "second measure",
+    "value",
+    "95 % interval",
+    "s per sequence",
+]
+
+
+def mean_interval(values, scale=1.0):
+    v = scale * np.asarray(values, dtype=np.float64)
+    return [float(v.mean()), list(metrics.bootstrap_interval(np.mean, v))]
+
+
+def label_task(n, sampler, ev, test):
+    labels = [ev.class_names[i % len(ev.class_names)] for i in range(n)]
+    x = tasks.label_control(labels, n, seed=0, progress=False, **sampler)
+    s = ev.score(x, np.array([ev.class_index(y) for y in labels]), intervals=True)
+    return ["IC Acc (%)", s["accuracy"], list(s["accuracy_ci"])], [
+        "FID",
+        s["fid"],
+        list(s["fid_ci"]),
+    ]
+
+
+def filling_task(n, sampler, ev, test):
+    from facelib import inpainting
+
+    pick = np.linspace(0, len(test.landmarks) - 1, n).round().astype(int)
+    truth, targets = test.landmarks[pick], test.labels[pick]
+    known = inpainting.fill_masks("FFM", n, truth.shape[1], seed=0)
+    x = tasks.fill(truth, known, progress=False, seed=0, **sampler)
+    s = ev.score(x, targets, intervals=True)
+    missing = [
+        metrics.missing_frame_error(a[None], b[None], k[None])
+        for a, b, k in zip(x, truth, known)
+    ]
+    return ["IC Acc (%)", s["accuracy"], list(s["accuracy_ci"])], [
+        "missing-frame error (mm)",
+        *mean_interval(missing),
+    ]
+
+
+def geometry_task(n, sampler, ev_s, test):
+    from facelib import experiments
+
+    per_class = max(2, n // len(ev_s.class_names))  # pairs: diversity needs them
+    rows, labels, neutral, known = experiments.table4_inputs(
+        test, ev_s.class_names, per_class
+    )
+    x = tasks.geometry_adaptive(
+        neutral, labels, len(rows), progress=False, seed=0, **sampler
+    )
+    s = ev_s.score(x, test.targets("S")[rows], intervals=True)
+    given = np.linalg.norm(x[known] - neutral, axis=-1).max(-1)
+    return ["type-S IC Acc (%)", s["accuracy"], list(s["accuracy_ci"])], [
+        "known frame's distance to the face (mm)",
+        *mean_interval(given),
+    ]
+
+
+def keyframe_task(n, sampler, ev, test):
+    from facelib import experiments
+
+    requests = experiments.random_keys(n, seed=4)
+    x = np.concatenate(
+        [
+            tasks.keyframes(keys, 1, neutral, seed=5 + k, progress=False, **sampler)
+            for k, (keys, neutral) in enumerate(requests)
+        ]
+    )
+    report = tasks.keyframe_report(x, requests, test.landmarks)
+    met = mean_interval(report["met"], 100)
+    met[1] = [float(np.clip(v, 0, 100)) for v in met[1]]
+    return ["met smoothly (%)", *met], [
+        "key error (mm)",
+        *mean_interval(report["error"]),
+    ]
+
+
+GUIDED_TASKS = {
+    "label": label_task,
+    "filling": filling_task,
+    "geometry": geometry_task,
+    "keyframes": keyframe_task,
+}
+
+
+def task_rows(args, ev):
+    test = data.load_dataset("coma", "test")
+    ev_s = evaluation.load_evaluator("coma", "S")
+    rows = []
+    for task in args.tasks:
+        for name, sampler in TASK_SAMPLERS:
+            t0 = time.perf_counter()
+            first, second = GUIDED_TASKS[task](
+                args.task_n, sampler, ev_s if task == "geometry" else ev, test
+            )
+            seconds = (time.perf_counter() - t0) / args.task_n
+            rows.append([task, name, *first, *second, seconds])
+            print(" | ".join(map(str, rows[-1])), flush=True)
+    return rows
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--experiment", choices=["steps", "tasks"], default="steps")
     parser.add_argument("--n", type=int, default=128, help="unconditional sequences")
     parser.add_argument(
         "--guided-n", type=int, default=96, help="label-controlled sequences"
@@ -197,65 +323,92 @@ def main():
         nargs="+",
         choices=list(GROUPS),
         default=list(GROUPS),
-        help="the row groups to run (default: all)",
+        help="steps: the row groups to run (default: all)",
     )
     parser.add_argument(
         "--steps",
         type=int,
         nargs="+",
         default=None,
-        help="only the rows of these step counts (default: all)",
+        help="steps: only the rows of these step counts (default: all)",
+    )
+    parser.add_argument(
+        "--tasks",
+        nargs="+",
+        choices=list(GUIDED_TASKS),
+        default=list(GUIDED_TASKS),
+        help="tasks: the guided tasks to run (default: all)",
+    )
+    parser.add_argument(
+        "--task-n", type=int, default=48, help="tasks: sequences per row"
     )
     results.add_save_options(parser)
     args = parser.parse_args()
     results.check_save_args(args)
-    if args.n < BATCH or args.n % BATCH or args.guided_n < 24:
+    if args.n < BATCH or args.n % BATCH or min(args.guided_n, args.task_n) < 24:
         parser.error(
-            f"--n must be a multiple of {BATCH} and --guided-n at least 24 (two of"
-            f" each label), got {args.n} and {args.guided_n}"
+            f"--n must be a multiple of {BATCH}, --guided-n and --task-n at least 24"
+            f" (two of each label), got {args.n}, {args.guided_n}, {args.task_n}"
         )
     torch.set_num_threads(1)
     t0 = time.perf_counter()
     ev = evaluation.load_evaluator("coma", "I")
-    rows = run_rows(args, ev)
-    if args.save:
-        provenance = None
-        if set(args.rows) != set(GROUPS):
-            rows, provenance = results.merged_rows(args.save, rows, key_length=2)
-        students = [
-            f"student_denoiser_coma_{k}" for k in tasks.shipped_students("coma")
-        ]
-        path = results.save_result(
-            args.save,
-            title="Quality against the number of steps: DDPM, DDIM, students, flow",
-            columns=COLUMNS,
-            rows=rows,
-            run=results.Run(
-                allow_dirty=args.allow_dirty,
-                checkpoints=[
-                    "denoiser_coma",
-                    "denoiser_coma_flow",
-                    "guide_coma_I",
-                    "ic_coma_I",
-                    *students,
-                ],
-                seeds=list(range(args.n // BATCH)),
-                n=args.n,
-                steps=STEPS,
-                wall_time_s=time.perf_counter() - t0,
-                settings=[config.LabelControl()],
-            ),
-            notes=(
-                f"unconditional: n = {args.n} in batches of {BATCH}, one thread, each"
-                f" row in a fresh process; guided: n = {args.guided_n}, the labels in"
-                " equal numbers, config.LabelControl's defaults for the sampler;"
-                " intervals: 95 % bootstrap over the sequences; FID against the"
-                " training split; speed: the mean frame-to-frame speed over the test"
-                " split's; DDPM and DDIM on trailing steps unless 'uniform'"
-            ),
-            row_provenance=provenance,
-        )
-        print(f"saved {path}")
+    steps_run = args.experiment == "steps"
+    rows = run_rows(args, ev) if steps_run else task_rows(args, ev)
+    if not args.save:
+        return
+    provenance = None
+    everything = set(args.rows if steps_run else args.tasks) == set(
+        GROUPS if steps_run else GUIDED_TASKS
+    )
+    if not everything or (steps_run and args.steps):
+        rows, provenance = results.merged_rows(args.save, rows, key_length=2)
+    students = [f"student_denoiser_coma_{k}" for k in tasks.shipped_students("coma")]
+    path = results.save_result(
+        args.save,
+        title=(
+            "Quality against the number of steps: DDPM, DDIM, students, flow"
+            if steps_run
+            else "The guided tasks at few steps: students, flow, DDIM"
+        ),
+        columns=COLUMNS if steps_run else TASK_COLUMNS,
+        rows=rows,
+        run=results.Run(
+            allow_dirty=args.allow_dirty,
+            checkpoints=[
+                "denoiser_coma",
+                "denoiser_coma_flow",
+                "guide_coma_I",
+                "ic_coma_I",
+                *students,
+                *([] if steps_run else ["guide_coma_S", "ic_coma_S"]),
+            ],
+            seeds=list(range(args.n // BATCH)) if steps_run else [0],
+            n=args.n if steps_run else args.task_n,
+            steps=STEPS if steps_run else [4, 16, 50],
+            wall_time_s=time.perf_counter() - t0,
+            settings=[config.LabelControl(), config.Fill(), config.GeometryAdaptive()]
+            + [config.Keyframes()],
+        ),
+        notes=(
+            f"unconditional: n = {args.n} in batches of {BATCH}, one thread, each row"
+            f" in a fresh process; guided: n = {args.guided_n}, the labels in equal"
+            " numbers, config.LabelControl's defaults for the sampler; intervals: 95 %"
+            " bootstrap over the sequences; FID against the training split; speed: the"
+            " mean frame-to-frame speed over the test split's; DDPM and DDIM on"
+            " trailing steps unless 'uniform'"
+            if steps_run
+            else (
+                f"n = {args.task_n} per row; each task's settings are its book defaults"
+                " (config) with the sampler changed; intervals: 95 % bootstrap over"
+                " the sequences; filling: n test sequences evenly spread, FFM masks"
+                " (seed 0); geometry: Table 4's inputs; keyframes: random real keys"
+                " (seed 4)"
+            )
+        ),
+        row_provenance=provenance,
+    )
+    print(f"saved {path}")
 
 
 if __name__ == "__main__":

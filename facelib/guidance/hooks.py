@@ -180,6 +180,13 @@ class ReconstructionGuidance:
     about how the unknown frames must change to fit them; this gradient does, through
     the denoiser.  The norm (not its square) makes the step size independent of how far
     off the estimate is (DPS).  Costs one backward pass per step.
+
+    On a deterministic chain (DDIM at eta = 0, a distilled student, the flow) the step
+    is ``scale * sqrt(abar_t) * grad``: the gradient carries the 1 / sqrt(abar_t) of
+    x0_hat (about 150 at t = T on the linear schedule; its norm is about 400 there), a
+    push that an ancestral chain forgets under its fresh noise but a deterministic one
+    keeps to the end (filling with DDIM-50: 57 mm off on the missing frames without
+    the factor, 0.7 mm with it; chapter 14).
     """
 
     model: torch.nn.Module
@@ -205,7 +212,10 @@ class ReconstructionGuidance:
         return (squared * known).sum((1, 2)).sqrt()
 
     def __call__(self, x_hat, xt, t, out):
-        return x_hat - self.scale * gradient_at(xt, lambda x: self.known_error(x, t))
+        step = self.scale * gradient_at(xt, lambda x: self.known_error(x, t))
+        if self.diffusion.eta == 0:  # deterministic: see the class docstring
+            step = step * float(self.diffusion.sqrt_alphas_bar[t])
+        return x_hat - step
 
 
 def best_particles(x, score, t, particles):
