@@ -510,6 +510,38 @@ def steps_figure(record, figsize=(11, 3.3)):
     return fig
 
 
+def few_steps_figure(record, figsize=(11, 3.3)):
+    """The stored table of quality against the number of network calls
+    (benchmarks/few_steps.py): FID, the frame-to-frame speed over the data's (the band
+    of +-10 % around 1 shaded) and the guided accuracy, one line per sampler (DDPM,
+    DDIM, students, flow), each with its 95 % interval as a band; log-scaled calls.
+    Returns the figure."""
+    col = {
+        name: i for i, name in enumerate(record["columns"]) if name != "95 % interval"
+    }
+    rows = [r for r in record["rows"] if r[col["FID"]] != ""]
+    fig, axes = plt.subplots(1, 3, figsize=figsize)
+    panels = zip(axes, ("FID", "speed / data's", "guided Acc (%)"))
+    for ax, measure in panels:
+        m = col[measure]
+        for i, name in enumerate(dict.fromkeys(r[0] for r in rows)):
+            mine = sorted(
+                (r for r in rows if r[0] == name and r[m] != ""),
+                key=lambda r: r[col["network calls"]],
+            )
+            calls = [r[col["network calls"]] for r in mine]
+            ax.plot(calls, [r[m] for r in mine], "o-", color=f"C{i}", label=name)
+            low, high = np.array([r[m + 1] for r in mine], dtype=float).T
+            ax.fill_between(calls, low, high, color=f"C{i}", alpha=0.12)
+        if measure == "speed / data's":
+            ax.axhspan(0.9, 1.1, color="0.85", zorder=0)
+        ax.set(xscale="log", xlabel="network calls per sequence", ylabel=measure)
+        ax.set_yscale("log" if measure != "guided Acc (%)" else "linear")
+    axes[0].legend(fontsize=7)
+    fig.tight_layout()
+    return fig
+
+
 def spiral_figure(canonical, faces, spirals, vertices, radius=14.0, figsize=(10, 4.4)):
     """Spirals (SpiralNet++ neighbour orderings) of a few vertices on the template's
     canonical plane: one panel per vertex of ``vertices`` ({title: vertex index}), one

@@ -359,6 +359,11 @@ class DistillationRecipe(Recipe):
         self.settings = settings
         self.teacher = load_denoiser(settings.teacher)
         self.teacher.model.eval().requires_grad_(False)
+        if self.teacher.model.config.schedule == "flow":
+            raise ValueError(
+                f"{settings.teacher}: distillation takes a DDPM denoiser (or a student"
+                " of one), not a rectified flow"
+            )
         recorded = self.teacher.meta["training"]
         # the teacher's data as the teacher saw it (a student records its DDPM's)
         self.data = DenoiserRecipe(
@@ -375,11 +380,6 @@ class DistillationRecipe(Recipe):
             "distilled_from", Path(settings.teacher).name
         )
         t = self.teacher.model.config
-        if t.schedule == "flow":
-            raise ValueError(
-                f"{settings.teacher}: distillation takes a DDPM denoiser (or a student"
-                " of one), not a rectified flow"
-            )
         self.guidance_scale = self._guidance_scale(t, recorded)
         self.architecture = model_config or replace(t, prediction="v")
         self.name = (

@@ -54,4 +54,7 @@ SHIPPED = {
     # Issue 28: the noisy AU-intensity regressor of AU-curve control (the fine-control
     # chapter).
     "au_regressor_coma": ("au_regressor", {}),
+    # Issue 46: the rectified flow on the same network, data, steps and batch as
+    # denoiser_coma (sampler "flow")
+    "denoiser_coma_flow": ("denoiser", {"schedule": "flow", "prediction": "u"}),
 }
