@@ -525,6 +525,11 @@ LABEL_GUIDANCE = ("classifier", "cfg")
 # with both samplers at 50 and 200 steps)
 MEAN_SHIFT_SCALE = 10.0
 CFG_SCALE = 2.5  # classifier-free guidance's weight w: MDM's (Tevet et al. 2023)
+# Our choice: below this abar_t, x_t holds no signal (the rectified flow's t = T: abar
+# 2.5e-10; the linear schedule's abar_T is 4e-5), and the mean shift under DDIM, whose
+# x0_hat moves by 1 / sqrt(abar_t) times its change of eps, guides nothing there
+# (chapter 14: one guided step from the flow's pure noise moved x_t 90 times its norm)
+GUIDANCE_MIN_ABAR = 1e-6
 # The mean shift's scale for editing (config.Edit; our choice): 20, where 3 edits in 4
 # read the new label with the neutral frame kept (results/fast_sampling_edit.json: 56 %
 # at 10, 75 % at 20, 88 % at 30; the first regenerated frame then steps 0.6, 1.3 and 1.7

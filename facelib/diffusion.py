@@ -170,6 +170,9 @@ class _Relabelled(torch.nn.Module):
     def cosine(self, x, t, *args, **kwargs):
         return self.network.cosine(x, self.time(t, x), *args, **kwargs)
 
+    def eps_and_x0(self, x, t, *args, **kwargs):
+        return self.network.eps_and_x0(x, self.time(t, x), *args, **kwargs)
+
 
 class TimeMapped(_Relabelled):
     """A network seen through a (respaced) chain: called as ``net(x, t, ...)``,
@@ -374,16 +377,27 @@ class GaussianDiffusion:
         of step t (what hooks and callbacks, which are given the chain's step, read the
         noise level by).
         """
-        eps = self.wrap(model)(xt, t, mask)
+        eps, x0 = self.model_estimates(model, xt, t, mask)
         return {
-            **self.mean_variance_from_eps(xt, t, eps),
+            **self.mean_variance_from_eps(xt, t, eps, x0),
             "time": float(self.timesteps[t]),
         }
 
-    def mean_variance_from_eps(self, xt, t, eps):
-        """:meth:`p_mean_variance` for a given noise estimate eps
-        (the mean is linear in eps)."""
-        x0 = self.predict_x0(xt, t, eps)
+    def model_estimates(self, model, xt, t, mask=None):
+        """(eps_hat, x0_hat) of ``model`` at the chain's step t: a Denoiser's own x0_hat
+        where its target gives one (Denoiser.eps_and_x0), else eps inverted (Eq. 6)."""
+        network = self.wrap(model)
+        if hasattr(network.network, "eps_and_x0"):
+            eps, x0 = network.eps_and_x0(xt, t, mask)
+        else:
+            eps, x0 = network(xt, t, mask), None
+        return eps, (self.predict_x0(xt, t, eps) if x0 is None else x0)
+
+    def mean_variance_from_eps(self, xt, t, eps, x0=None):
+        """:meth:`p_mean_variance` for a given noise estimate eps (the mean is linear in
+        eps) and the model's clean estimate x0 (None: from eps, Eq. 6 inverted)."""
+        if x0 is None:
+            x0 = self.predict_x0(xt, t, eps)
         variance = _extract(self.sigmas**2, t, xt)
         if self.eta is None:
             mean = (xt - _extract(self.eps_coef, t, xt) * eps) / _extract(

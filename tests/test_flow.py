@@ -208,12 +208,12 @@ def test_label_control_guides_the_flow_with_the_linear_schedules_classifier():
 
 def test_the_sampler_names_the_denoiser_it_runs_and_refuses_what_is_not_shipped(monkeypatch):
     from facelib import tasks
-    monkeypatch.setattr(tasks.loading, "shipped_students", lambda dataset: [1, 4])
+    monkeypatch.setattr(tasks.loading, "shipped_students", lambda dataset, variant=None: [1, 4])
     assert tasks.denoiser_name("coma", "ddim") == "denoiser_coma"
     assert tasks.denoiser_name("coma", "ddpm", variant="cfg") == "denoiser_coma_cfg"
     assert tasks.denoiser_name("coma", "flow") == "denoiser_coma_flow"
     assert tasks.denoiser_name("coma", "student", 4) == "student_denoiser_coma_4"
-    with pytest.raises(ValueError, match="no student of coma distilled for steps=50; the shipped students take 1, 4 steps"):
+    with pytest.raises(ValueError, match="no student of denoiser_coma distilled for steps=50; the shipped students take 1, 4 steps"):
         tasks.denoiser_name("coma", "student", 50)
     with pytest.raises(ValueError, match="the flow sampler has no 'cfg' denoiser"):
         tasks.denoiser_name("coma", "flow", variant="cfg")
@@ -222,3 +222,19 @@ def test_the_sampler_names_the_denoiser_it_runs_and_refuses_what_is_not_shipped(
     s = config.Unconditional(sampler="student", steps=4)
     assert s.fast().steps == 4 and s.ddim_eta == 0.0
     assert config.Unconditional(sampler="flow").fast().steps == 20
+
+
+def test_the_mean_shift_guides_nothing_from_the_flows_pure_noise():
+    """At the flow's t = T (abar ~ 2.5e-10) the mean shift's x0_hat would move by 1 /
+    sqrt(abar) times its change of eps; below config.GUIDANCE_MIN_ABAR it leaves the
+    step alone, and guides the steps after it."""
+    from facelib.guidance import MeanShiftGuidance
+    chain = GaussianDiffusion(named_betas("flow", T)).respace([500, 1000, 1500, 2000]).with_eta(0.0)
+    assert chain.alphas_bar[4] < config.GUIDANCE_MIN_ABAR < chain.alphas_bar[3]
+    hook = MeanShiftGuidance(lambda x, t: x.sum(dim=(1, 2, 3)), chain, scale=10.0)
+    x = torch.randn(2, 5, 68, 3, generator=torch.Generator().manual_seed(0))
+    out = chain.model_estimates(lambda x, t, mask=None: x, x, 3)
+    out = chain.mean_variance_from_eps(x, 3, *out)
+    x_hat = out["mean"]
+    assert torch.equal(hook(x_hat, x, 4, {**out}), x_hat)
+    assert not torch.equal(hook(x_hat, x, 3, out), x_hat)

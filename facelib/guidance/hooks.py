@@ -34,7 +34,7 @@ from typing import Callable
 
 import torch
 
-from ..config import ADAGRAD_STEPS, GUIDANCE_WEIGHT
+from ..config import ADAGRAD_STEPS, GUIDANCE_MIN_ABAR, GUIDANCE_WEIGHT
 from ..diffusion import GaussianDiffusion
 
 
@@ -157,16 +157,18 @@ class MeanShiftGuidance:
         if self.diffusion.eta is None:
             return x_hat + self.scale * out["guidance_variance"] * grad
         # DDIM (Dhariwal & Nichol 2021, Alg. 2):
-        # eps_hat = eps - s sqrt(1 - abar_t) grad, the step taken with eps_hat
-        eps = (
-            out["eps"]
-            - self.scale * float(self.diffusion.sqrt_one_minus_alphas_bar[t]) * grad
+        # eps_hat = eps - s sqrt(1 - abar_t) grad, the step taken with eps_hat (and the
+        # x0_hat it implies: the model's own moved by Eq. 6's change for eps_hat - eps)
+        d = self.diffusion
+        if d.alphas_bar[t] < GUIDANCE_MIN_ABAR:  # pure noise: see config
+            return x_hat
+        shift = -self.scale * float(d.sqrt_one_minus_alphas_bar[t]) * grad
+        x0 = (
+            out["x0"]
+            - float(d.sqrt_one_minus_alphas_bar[t] / d.sqrt_alphas_bar[t]) * shift
         )
-        return (
-            x_hat
-            + self.diffusion.mean_variance_from_eps(xt, t, eps)["mean"]
-            - out["mean"]
-        )
+        guided = d.mean_variance_from_eps(xt, t, out["eps"] + shift, x0)["mean"]
+        return x_hat + guided - out["mean"]
 
 
 @dataclass
@@ -205,9 +207,9 @@ class ReconstructionGuidance:
 
     def known_error(self, x, t):
         """||x0_hat(x)|S_K - x_0|S_K|| per sequence (B,)."""
-        eps = self.model(x, t)
+        _, x0_hat = self.diffusion.model_estimates(self.model, x, t)
         # (B, F, 68)
-        squared = ((self.diffusion.predict_x0(x, t, eps) - self.x0) ** 2).sum(-1)
+        squared = ((x0_hat - self.x0) ** 2).sum(-1)
         known = self.known if self.known.ndim == 3 else self.known[:, :, None]
         return (squared * known).sum((1, 2)).sqrt()
 

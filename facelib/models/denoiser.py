@@ -182,7 +182,21 @@ class Denoiser(BiT):
         """The clean-sequence estimate x0_hat(x_t, t), computed in the target's own form
         (x_0, sqrt(abar) x_t - sqrt(1 - abar) v, or from u), so that it stays exact
         where abar_t is small and eps would be divided by sqrt(abar_t)."""
+        return self.x0_from(xt, t, self.output(xt, t, mask, labels))
+
+    def eps_and_x0(self, xt, t, mask=None, labels=None):
+        """(eps_hat, x0_hat) from one pass of the network: x0_hat in the target's own
+        form (:meth:`x0`), or None for an eps network, whose x0_hat the sampler computes
+        from eps (Eq. 6 inverted; the rectified flow's needs its own at t = T, where its
+        eps is x_t itself)."""
         output = self.output(xt, t, mask, labels)
+        eps = self.to_eps(xt, t, output)
+        if self.config.prediction == "eps":
+            return eps, None
+        return eps, self.x0_from(xt, t, output)
+
+    def x0_from(self, xt, t, output):
+        """The clean estimate that the network's ``output`` implies (see :meth:`x0`)."""
         abar = self._abar(t, xt)
         if self.config.prediction == "x0":
             return output
