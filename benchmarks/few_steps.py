@@ -210,7 +210,7 @@ TASK_COLUMNS = [
     "value",
     "95 % interval",
     "second measure",
-    "value",
+    "second value",
     "95 % interval",
     "s per sequence",
 ]
