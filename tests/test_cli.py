@@ -192,6 +192,7 @@ def test_animate_a_mesh_of_another_topology_units_and_pose(tmp_path):
     (["--label", "wink"], "unknown label"),
     (["--label", "mouth_open", "--mesh", "SPHERE"], "has 162 vertices; allowed: 300 to 200,000"),
     (["--label", "mouth_open", "--steps", "0"], "steps must be a positive integer, got 0"),
+    (["--label", "mouth_open", "--fast"], "give --fast or --steps, not both"),
 ])
 def test_animate_refuses_bad_input_and_writes_nothing(tmp_path, face_obj, capsys, args, message):
     sphere = tmp_path / "sphere.obj"
