@@ -46,7 +46,8 @@ STEPS = [1, 2, 4, 8, 16, 50, 200, 2000]
 GROUPS = {
     "floor": [("network, one forward pass", "floor", 1)],
     "ddpm": [("DDPM", "ddpm", k) for k in STEPS],
-    "ddim": [("DDIM", "ddim", k) for k in STEPS],
+    # DDIM at 2000 steps: chapter 11's stored table (results/fast_sampling_steps.json)
+    "ddim": [("DDIM", "ddim", k) for k in STEPS[:-1]],
     "uniform": [("DDIM, uniform", "ddim-uniform", k) for k in (4, 16, 50)],
     "student": None,  # the shipped students, found at run time
     "flow": [("flow, Euler", "flow", k) for k in STEPS[:-1]],
@@ -261,10 +262,11 @@ def geometry_task(n, sampler, ev_s, test):
         neutral, labels, len(rows), progress=False, seed=0, **sampler
     )
     s = ev_s.score(x, test.targets("S")[rows], intervals=True)
-    given = np.linalg.norm(x[known] - neutral, axis=-1).max(-1)
+    # how far the face moves from its given neutral frame (which is kept exactly)
+    motion = np.linalg.norm(x - neutral[:, None], axis=-1).max(axis=(1, 2))
     return ["type-S IC Acc (%)", s["accuracy"], list(s["accuracy_ci"])], [
-        "known frame's distance to the face (mm)",
-        *mean_interval(given),
+        "largest motion from the face (mm)",
+        *mean_interval(motion),
     ]
 
 
