@@ -283,9 +283,10 @@ def keyframe_task(n, sampler, ev, test):
     report = tasks.keyframe_report(x, requests, test.landmarks)
     met = mean_interval(report["met"], 100)
     met[1] = [float(np.clip(v, 0, 100)) for v in met[1]]
+    # the keys themselves are met exactly (replacement): a pop shows in the speed
     return ["met smoothly (%)", *met], [
-        "key error (mm)",
-        *mean_interval(report["error"]),
+        "speed into or out of the key / data's p95",
+        *mean_interval(report["speed_ratio"]),
     ]
 
 
