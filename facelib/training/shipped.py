@@ -16,7 +16,7 @@ SHIPPED = {
     "denoiser_coma": ("denoiser", {}),
     "denoiser_bu": ("denoiser", {"dataset": "bu"}),
     "denoiser_coma+bu": ("denoiser", {"dataset": "coma+bu"}),
-    "denoiser_coma_var": ("denoiser", {"num_frames": (35, 45), "steps": 8000}),
+    "denoiser_coma_var": ("denoiser", {"num_frames": (35, 45)}),
     "guide_coma_I": ("guide", {}),
     "guide_coma_S": ("guide", {"classifier_type": "S"}),
     "guide_bu_I": ("guide", {"dataset": "bu"}),
