@@ -69,6 +69,6 @@ SHIPPED = {
                 "teacher_steps": 2 * k,
             },
         )
-        for k in (128, 64, 32, 16, 8, 4)
+        for k in (128, 64, 32, 16, 8, 4, 2, 1)
     },
 }
