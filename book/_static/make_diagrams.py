@@ -71,11 +71,12 @@ CHAPTERS = {  # id: (title lines, part colour, x, y)
     "12": (["12 Fine control:", "AUs and keyframes"], 5, 740, 130),
     "10": (["10 End to end"], 4, 740, 290),
     "13": (["13 Your own face:", "registration"], 5, 740, 380),
+    "14": (["14 Fewer steps still:", "distillation, flow"], 5, 920, 80),
 }
 EDGES = [("01", "03"), ("02", "03"), ("01", "04"), ("03", "05"), ("04", "05"), ("05", "06"), ("03", "07"),
          ("04", "07"), ("05", "08"), ("07", "08"), ("01", "09"), ("08", "10"), ("09", "10"), ("05", "11"),
          ("08", "12"), ("11", "12"), ("06", "a1"), ("09", "13"),
-         ("10", "13")]
+         ("10", "13"), ("11", "14")]
 PARTS = [("Foundations", "#f2f2f2", "#777"), ("The diffusion model", "#eef3fb", "#4a6fa5"),
          ("Measuring a generator", "#f5eefa", "#8a5aa8"), ("Conditioning the reverse process", "#fdf3e6", "#c9822b"),
          ("From landmarks to meshes", "#eaf6ec", "#3f8f52"), ("Beyond the paper", "#fbecec", "#b24a4a"),
@@ -100,7 +101,7 @@ def chapter_map():
         lx, ly = 20 + 220 * (k % 3), 400 + 20 * (k // 3)
         b.append(f'<rect x="{lx}" y="{ly}" width="14" height="14" rx="3" fill="{fill}" stroke="{stroke}"/>')
         b.append(f'<text x="{lx + 19}" y="{ly + 11}" font-size="11" {FONT}>{escape(name)}</text>')
-    return svg(900, 470, "\n".join(b), "Which chapter builds on which: an arrow from a chapter to one that needs it")
+    return svg(1090, 470, "\n".join(b), "Which chapter builds on which: an arrow from a chapter to one that needs it")
 
 
 def bit():
