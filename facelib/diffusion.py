@@ -387,10 +387,11 @@ class GaussianDiffusion:
         """(eps_hat, x0_hat) of ``model`` at the chain's step t: a Denoiser's own x0_hat
         where its target gives one (Denoiser.eps_and_x0), else eps inverted (Eq. 6)."""
         network = self.wrap(model)
+        inputs = () if mask is None else (mask,)  # a plain f(x, t) takes no mask
         if hasattr(network.network, "eps_and_x0"):
-            eps, x0 = network.eps_and_x0(xt, t, mask)
+            eps, x0 = network.eps_and_x0(xt, t, *inputs)
         else:
-            eps, x0 = network(xt, t, mask), None
+            eps, x0 = network(xt, t, *inputs), None
         return eps, (self.predict_x0(xt, t, eps) if x0 is None else x0)
 
     def mean_variance_from_eps(self, xt, t, eps, x0=None):

@@ -57,8 +57,8 @@ SHIPPED = {
     # Issue 46: the rectified flow on the same network, data, steps and batch as
     # denoiser_coma (sampler "flow")
     "denoiser_coma_flow": ("denoiser", {"schedule": "flow", "prediction": "u"}),
-    # Issue 46: progressive distillation of denoiser_coma's DDIM chain, 256 -> 128 -> ...
-    # -> 1 steps, each round's student the next round's teacher (sampler "student")
+    # Issue 46: progressive distillation of denoiser_coma's DDIM chain, 256 -> 128 ->
+    # ... -> 1 steps, each round's student the next round's teacher (sampler "student")
     **{
         f"student_denoiser_coma_{k}": (
             "student",
