@@ -383,11 +383,13 @@ class GaussianDiffusion:
             "time": float(self.timesteps[t]),
         }
 
-    def model_estimates(self, model, xt, t, mask=None):
-        """(eps_hat, x0_hat) of ``model`` at the chain's step t: a Denoiser's own x0_hat
-        where its target gives one (Denoiser.eps_and_x0), else eps inverted (Eq. 6)."""
+    def model_estimates(self, model, xt, t, *inputs):
+        """(eps_hat, x0_hat) of ``model`` at the chain's step t, called with x_t, its
+        time label and ``inputs`` (the sampler passes the frame mask, None or not;
+        guidance hooks pass nothing, so that a reader's f(x, t) works): a Denoiser's own
+        x0_hat where its target gives one (Denoiser.eps_and_x0), else eps inverted (Eq.
+        6)."""
         network = self.wrap(model)
-        inputs = () if mask is None else (mask,)  # a plain f(x, t) takes no mask
         if hasattr(network.network, "eps_and_x0"):
             eps, x0 = network.eps_and_x0(xt, t, *inputs)
         else:
