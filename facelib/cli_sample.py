@@ -46,6 +46,13 @@ FIELD_HELP = {
         " Euler step (chapter 14)"
     ),
     "eta": "DDIM's noise, in [0, 1] (0: deterministic)",
+    "join": (
+        "how windows join: fill (the shared frames known, with reconstruction"
+        " guidance), replace (Alg. 3 as printed), handshake (DoubleTake: all windows"
+        " at once, shared frames averaged), concat (independent windows)"
+    ),
+    "transition": "frames each window shares with the one before (at the native rate)",
+    "fps": "frames per second written",
     "guidance": (
         "classifier: a noisy classifier steers the unconditional denoiser (the"
         " paper's); cfg: classifier-free guidance of the label-conditional denoiser"
@@ -129,6 +136,7 @@ CHOICES = {
     "head_input": config.HEAD_INPUTS,
     "read": config.HEAD_INPUTS,
     "order": data.KIND_NAMES,
+    "join": config.JOIN_METHODS,
 }
 TASK_CHOICES = {("keyframes", "method"): config.KEYFRAME_METHODS}
 INTERNAL = {("fill", "num_frames"), ("edit", "num_frames")}  # the input's length
@@ -140,6 +148,14 @@ KEYFRAMES = (
     ' 0]}, {"frame": 10, "landmark": 8, "position": [x, y, z]}]}: frames from 0,'
     " iBUG-68 landmark indices, positions in mm, displacements in mm from the neutral"
     " face"
+)
+LONG = (
+    "long --schedule 'high_smile:3s, neutral:1s' --neutral face.npz --out long.npz:"
+    " one sequence of any length, made window by window (each the model's length,"
+    " overlapping the one before by --transition frames, joined by --join) at"
+    f" {config.NATIVE_FPS} frames per second and written at --fps"
+    f" ({config.LONG_FPS_RANGE[0]}..{config.LONG_FPS_RANGE[1]}); at most"
+    f" {config.LONG_MAX_SECONDS} s"
 )
 EDIT = (
     "edit --input seq.npz --label X --out edited.npz: each sequence is inverted by DDIM"
@@ -239,6 +255,23 @@ def _au(args, s, den):
 def _keyframes(args, s, den):
     keys, neutral = tasks.read_constraints(args.constraints)
     return tasks.keyframes(keys, args.n, neutral, s, den), {}
+
+
+def _long(args, s, den):
+    if (args.schedule is None) == (args.seconds is None):
+        raise ValueError("give either --schedule or --seconds (not both)")
+    face = _neutral(args.neutral)
+    guide = tasks.load_guide(s.dataset, "I")
+    schedule = (
+        tasks.long.parse_schedule(args.schedule, guide.class_names, s.transition)
+        if args.schedule is not None
+        else tasks.long.free_schedule(args.seconds, s.transition)
+    )
+    x = tasks.long.long_sequence(face, schedule, args.n, s, den, guide)
+    return x, {
+        "schedule": json.dumps([asdict(segment) for segment in schedule]),
+        "native_fps": tasks.long.NATIVE_FPS,
+    }
 
 
 LABEL = (
@@ -388,6 +421,46 @@ TASKS = {
             ),
         ),
         in_paper=False,
+    ),
+    "long": Task(
+        "any length: windows joined into one sequence that follows a schedule of"
+        " labels (not in the paper)",
+        config.Long(),
+        _long,
+        (
+            (
+                ("--schedule",),
+                dict(
+                    default=None,
+                    help=(
+                        "what the face does and for how long, e.g. 'high_smile:3s,"
+                        " neutral:1s, mouth_open:2s': labels of the dataset, neutral"
+                        " (the given face at rest) or free (unguided), seconds each"
+                    ),
+                ),
+            ),
+            (
+                ("--seconds",),
+                dict(
+                    default=None,
+                    type=float,
+                    help="this many seconds of unguided motion (instead of --schedule)",
+                ),
+            ),
+            (
+                ("--neutral",),
+                dict(
+                    required=True,
+                    help=(
+                        ".npz with the neutral landmarks (68, 3) in mm of the face"
+                        " (key 'neutral' or 'landmarks'), its first frame and every"
+                        " rest's last"
+                    ),
+                ),
+            ),
+        ),
+        in_paper=True,
+        usage=LONG,
     ),
     "keyframes": Task(
         "chosen landmarks at chosen frames, a natural sequence around them (not in the"
@@ -573,6 +646,10 @@ def settings_of(args):
         settings = replace(
             settings, lr=tasks.adagrad_lr(settings.dataset, settings.steps)
         )
+    if args.task == "long" and settings.lr is None:
+        settings = replace(
+            settings, lr=tasks.adagrad_lr(settings.dataset, settings.steps)
+        )
     if args.task == "text" and settings.guidance_weight is None:
         settings = replace(
             settings, guidance_weight=tasks.text_guidance_weight(settings.score)
@@ -652,6 +729,8 @@ def run(args):
                 "neutral",
                 "curve",
                 "constraints",
+                "schedule",
+                "seconds",
             )
             if hasattr(args, k)
         },

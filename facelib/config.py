@@ -991,6 +991,73 @@ class Keyframes(Sampling):
         _check_number("the reconstruction guidance scale", self.reconstruction_scale)
 
 
+# the chapter "Any length" (facelib/tasks/long.py)
+# our choice: the world's 40 frames are then 1.33 s, and an expression's rise (0.35-0.6
+# of them, face.sequences.Timing) takes 0.5-0.8 s, as a posed smile's onset does
+NATIVE_FPS = 30
+LONG_FPS_RANGE = (10, 60)  # the frame rates a long sequence is written at
+LONG_MAX_SECONDS = 3600  # one hour: 108,000 frames, 3,600 windows
+# how consecutive windows are joined: "fill" (the later window's first frames known,
+# Alg. 3 with the book's reconstruction guidance), "replace" (Alg. 3 as printed),
+# "handshake" (PriorMDM's DoubleTake, first take: all windows at once, their shared
+# frames averaged at every step), "concat" (independent windows end to end: the naive
+# baseline)
+JOIN_METHODS = ("fill", "replace", "handshake", "concat")
+# the words of a schedule that are not labels: the given face at rest; free motion
+SCHEDULE_NEUTRAL, SCHEDULE_FREE = "neutral", "free"
+
+
+@dataclass(frozen=True)
+class Long(Sampling):
+    """Sequences of any length (not in the paper): windows of the model's length, each
+    overlapping the one before by ``transition`` frames, joined by ``join``; a label's
+    windows are guided by Alg. 1, a neutral segment's end at the given face."""
+
+    steps: int | None = 100  # the filling chapter's chain (Fill)
+    variance: str | None = "posterior"
+    dataset: str = "coma"
+    join: str = "fill"
+    transition: int = 10  # frames each window shares with the one before (native)
+    fps: int = NATIVE_FPS  # the frame rate written (resampled from NATIVE_FPS)
+    reconstruction_scale: float = RECONSTRUCTION_SCALE
+    guidance_weight: float = GUIDANCE_WEIGHT
+    # None: ADAGRAD_LR of the dataset, scaled to the steps (tasks.adagrad_lr)
+    lr: float | None = None
+
+    def __post_init__(self):
+        super().__post_init__()
+        _check_choice("join", self.join, JOIN_METHODS)
+        _check_number("the reconstruction guidance scale", self.reconstruction_scale)
+        _check_number("the guidance weight (lambda)", self.guidance_weight)
+        _check_number("lr", self.lr, allow_none=True)
+        low, high = LONG_FPS_RANGE
+        if (
+            isinstance(self.fps, bool)
+            or not isinstance(self.fps, int)
+            or not low <= self.fps <= high
+        ):
+            raise ValueError(
+                f"fps must be an integer in {low}..{high}, got {self.fps!r}"
+            )
+        if (
+            isinstance(self.transition, bool)
+            or not isinstance(self.transition, int)
+            or not 1 <= self.transition <= self.num_frames // 2
+        ):
+            raise ValueError(
+                "transition must be a number of frames in 1.."
+                f"{self.num_frames // 2} (half a window of {self.num_frames}), got"
+                f" {self.transition!r}"
+            )
+
+    def paper(self):
+        # the joins by Alg. 3 as printed
+        return replace(super().paper(), join="replace", reconstruction_scale=0.0)
+
+    def fast(self):
+        return replace(self, steps=10)
+
+
 @dataclass(frozen=True)
 class GeometryAdaptive(Sampling):
     """Alg. 4 (geometry-adaptive generation with the type-S classifier), with the book's

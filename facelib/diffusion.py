@@ -371,7 +371,8 @@ class GaussianDiffusion:
         abar_{t-1} - sigma_t^2) eps_theta.
 
         "guidance_variance" is the variance the guidance of Alg. 1-4 weighs its pull
-        with: the step's own under DDPM; under DDIM, whose own is eta^2 beta~_t (0 at
+        with: the step's own under DDPM (beta_t where that is 0, the posterior variance
+        of the last step); under DDIM, whose own is eta^2 beta~_t (0 at
         eta = 0), the paper's sigma_t^2 = beta_t, so that guidance pulls about as hard
         whatever the sampler's noise (our choice).  "time" is the network's time label
         of step t (what hooks and callbacks, which are given the chain's step, read the
@@ -406,7 +407,11 @@ class GaussianDiffusion:
             mean = (xt - _extract(self.eps_coef, t, xt) * eps) / _extract(
                 np.sqrt(self.alphas), t, xt
             )
-            guidance_variance = variance
+            # the posterior variance beta~_1 is 0: Alg. 1's pull would divide by it;
+            # there it weighs with beta_1 (guided-diffusion clips the same zero)
+            guidance_variance = torch.where(
+                variance > 0, variance, _extract(self.betas, t, xt)
+            )
         else:
             abar_prev = _extract(self.alphas_bar_prev, t, xt)
             mean = (

@@ -200,6 +200,14 @@ def frame_speeds(sequences):
     return np.linalg.norm(x[:, 1:] - x[:, :-1], axis=-1).mean(-1)
 
 
+def frame_jerks(sequences):
+    """Jerk (mm/frame^3): the mean over landmarks of the third difference
+    ||x_{f+3} - 3 x_{f+2} + 3 x_{f+1} - x_f||, shape (n, F - 3); a join that keeps the
+    position but not the velocity shows here, not in :func:`frame_speeds`."""
+    x = np.asarray(sequences, dtype=np.float64)
+    return np.linalg.norm(np.diff(x, n=3, axis=1), axis=-1).mean(-1)
+
+
 def steps_away_from_seams(known):
     """Mask (n, F - 1) of the frame-to-frame steps between two unknown frames that do
     not touch a seam (no known frame among the step's frames or their neighbours): where

@@ -72,10 +72,11 @@ def good_args(task, files):
             "fill": [f"--input={files / 'seq.npz'}", "--known=0:10"],
             "geometry": ["--label=mouth_open", f"--neutral={files / 'neutral.npz'}"],
             "edit": ["--label=high_smile", f"--input={files / 'seq.npz'}"],
-            "au": ["--curve=AU12:0.5"], "keyframes": [f"--constraints={files / 'keys.json'}"]}[task]
+            "au": ["--curve=AU12:0.5"], "keyframes": [f"--constraints={files / 'keys.json'}"],
+            "long": ["--schedule=high_smile:0.5s", f"--neutral={files / 'neutral.npz'}"]}[task]
 
 
-TAKES_N = ("unconditional", "label", "text", "decoder", "geometry", "au", "keyframes")
+TAKES_N = ("unconditional", "label", "text", "decoder", "geometry", "au", "keyframes", "long")
 
 
 def refused(argv, out, pattern):
@@ -168,13 +169,25 @@ def options(task):
             st.builds(lambda v, f: f"AU26:{v}@{f}", st.floats(0, 0.5), st.integers(40) | st.integers(max_value=-1)),
             st.text(max_size=10).filter(lambda s: s.count(":") != 1)), r"AU|curve"),
                ("--tolerance", bad_number, r"tolerance"), ("--au-weight", bad_number, r"AU score|au[_-]weight")],
+        "long": [("--schedule", st.one_of(st.sampled_from(
+            ["", " ", ",", "high_smile", "high_smile:", ":2s", "smile:2s", "high_smile:0.1s", "high_smile:-1s",
+             "high_smile:2m", "high_smile:4000s", "high_smile:2s,,neutral:1s", "high_smile:2s; neutral:1s",
+             "neutral:1s, high_smile:nan", "free:3601s", "high_smile:1s:2s"]),
+            st.text(max_size=12).filter(lambda s: ":" not in s)), r"schedule|segment|expression"),
+                 ("--seconds", st.one_of(st.sampled_from(["0", "-1", "3601", "nan", "inf", "0.1"]), not_float),
+                  r"seconds|segment"),
+                 ("--fps", st.one_of(st.integers(max_value=9), st.integers(min_value=61)).map(str), r"fps"),
+                 ("--transition", st.one_of(st.integers(max_value=0), st.integers(min_value=21)).map(str),
+                  r"transition"),
+                 ("--join", unknown_name.filter(lambda s: s not in ("fill", "replace", "handshake", "concat")),
+                  r"join")],
         "keyframes": [("--method", unknown_name.filter(lambda s: s not in ("replace", "reconstruction", "both")),
                        r"method"), ("--reconstruction-scale", bad_number, r"reconstruction")],
     }
     return common + per_task.get(task, [])
 
 
-TASKS = ("unconditional", "label", "text", "decoder", "fill", "geometry", "edit", "au", "keyframes")
+TASKS = ("unconditional", "label", "text", "decoder", "fill", "geometry", "edit", "au", "keyframes", "long")
 
 
 @st.composite
@@ -268,7 +281,7 @@ def bad_input_file(draw):
     """(task, option, valid array) with a bad file for its --input or --neutral."""
     seq, neutral = VALID["seq"], VALID["neutral"]
     task, option = draw(st.sampled_from([("fill", "--input"), ("edit", "--input"), ("geometry", "--neutral"),
-                                         ("au", "--neutral")]))
+                                         ("au", "--neutral"), ("long", "--neutral")]))
     key = draw(st.sampled_from(["neutral", "landmarks"])) if option == "--neutral" else "landmarks"
     if option == "--input":
         kind, content, pattern = draw(bad_npz(key, seq, finite_frames=slice(0, 10) if task == "fill" else None))

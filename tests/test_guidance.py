@@ -7,7 +7,7 @@ import torch
 from facelib import config, data, descriptions, guidance, text
 from facelib.diffusion import GaussianDiffusion, linear_betas
 from facelib.guidance import (ClassifierScore, ContrastiveScore, CosineScore, DenoisedCosineScore, MeanShiftGuidance,
-                              OptimisationGuidance, log_p_theta, nearest_wording)
+                              OptimisationGuidance, ReconstructionGuidance, log_p_theta, nearest_wording)
 from facelib.text import description_embeddings
 
 
@@ -279,3 +279,34 @@ def test_a_plain_function_score_receives_the_noise_levels_time_as_guided_diffusi
         assert torch.allclose(shifted, reference, rtol=1e-5, atol=1e-6)
     # the chain's step itself (the old behaviour) would have been 19-27 % off: it is not what f received
     assert not torch.equal(seen[-1], torch.full((2,), 100.0))
+
+
+def test_alg1_on_a_chain_with_the_posterior_variance_stays_finite_at_the_last_step(small_classifier):
+    # beta~_1 = 0: log p_theta(x | x_1) would divide by it (NaN on every frame of a guided window of
+    # a long sequence); the pull weighs with beta_1 there, the variance elsewhere is the step's own.
+    clf, _ = small_classifier
+    chain = GaussianDiffusion(linear_betas(2000), variance="posterior").respace(10)
+    zero = lambda x, t, *a: torch.zeros_like(x)
+    xt = torch.randn(2, 40, 68, 3, generator=torch.Generator().manual_seed(0))
+    out = chain.p_mean_variance(zero, xt, 1)
+    assert float(out["variance"].max()) == 0.0
+    assert float(chain.betas[1]) > 0
+    assert float(out["guidance_variance"].max()) == pytest.approx(float(chain.betas[1]))
+    assert float(chain.p_mean_variance(zero, xt, 5)["guidance_variance"].flatten()[0]) == pytest.approx(float(chain.sigmas[5] ** 2))
+    guided = OptimisationGuidance(ClassifierScore(clf, [0, 1]), chain, lr=0.01)(out["mean"], xt, 1, out)
+    assert torch.isfinite(guided).all()
+
+
+def test_reconstruction_guidance_leaves_a_sequence_with_nothing_known_alone(denoiser):
+    # a batch of windows where one shares no frame (DoubleTake's windows, chapter "Any length"): the norm's
+    # gradient at zero is undefined (NaN on every frame before the clamp); that sequence is not pulled
+    chain = denoiser.diffusion_with(10, "posterior")
+    x0 = torch.randn(2, 40, 68, 3, generator=torch.Generator().manual_seed(1))
+    known = torch.zeros(2, 40, dtype=torch.bool)
+    known[0, :5] = True
+    guide = ReconstructionGuidance(denoiser.model, chain, x0, known, 2.0)
+    xt = torch.randn(2, 40, 68, 3, generator=torch.Generator().manual_seed(2))
+    x_hat = torch.zeros_like(xt)
+    step = guide(x_hat, xt, 5, {})
+    assert torch.isfinite(step).all()
+    assert torch.equal(step[1], x_hat[1]) and not torch.equal(step[0], x_hat[0])

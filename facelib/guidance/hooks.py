@@ -206,12 +206,15 @@ class ReconstructionGuidance:
         self.model = self.diffusion.wrap(self.model)
 
     def known_error(self, x, t):
-        """||x0_hat(x)|S_K - x_0|S_K|| per sequence (B,)."""
+        """||x0_hat(x)|S_K - x_0|S_K|| per sequence (B,); a sequence with nothing
+        known (a window of a batch that shares none, chapter "Any length") is not
+        pulled: its norm is clamped off zero, where the gradient of the norm is not
+        defined."""
         _, x0_hat = self.diffusion.model_estimates(self.model, x, t)
         # (B, F, 68)
         squared = ((x0_hat - self.x0) ** 2).sum(-1)
         known = self.known if self.known.ndim == 3 else self.known[:, :, None]
-        return (squared * known).sum((1, 2)).sqrt()
+        return (squared * known).sum((1, 2)).clamp_min(1e-20).sqrt()
 
     def __call__(self, x_hat, xt, t, out):
         step = self.scale * gradient_at(xt, lambda x: self.known_error(x, t))

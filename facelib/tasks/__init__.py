@@ -14,6 +14,8 @@ control, not in the paper, samples a label-conditional denoiser instead).
   the paper)
 * ``keyframes``: chosen landmarks at chosen frames, a natural sequence around them (not
   in the paper)
+* ``long``: sequences of any length from a schedule of labels, windows joined by
+  expression filling (not in the paper)
 * ``loading``: the trained denoiser and guidance networks they sample with
 
 Every task is called as ``task(what, n, settings, models..., progress, **overrides)``:
@@ -37,6 +39,7 @@ from .au import (
     requested_aus,
     requested_curves,
 )
+from . import long
 from .decoder import decoder_then_diffusion
 from .edit import check_sequences, edit, invert, keep_on_path
 from .fill import fill
@@ -73,6 +76,7 @@ from .text import text_control, text_guidance_weight, text_lr, text_score
 from .unconditional import unconditional
 
 __all__ = [
+    "long",
     "check_keys",
     "key_errors",
     "key_speeds",

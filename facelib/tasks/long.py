@@ -1,0 +1,388 @@
+"""Sequences of any length (not in the paper; the chapter "Any length"): a model of 40
+frames, composed.
+
+A schedule ("high_smile:3s, neutral:1s, mouth_open:2s") is cut into windows of the
+model's length.  Every window after the first shares its first ``transition`` frames
+with the end of the stream so far, and those frames are conditioned on as the known
+frames of expression filling (Alg. 3, with the book's reconstruction guidance: join
+"fill"), so the window continues the motion it starts from; only its new frames are
+kept.  Memory stays that of one window, whatever the length, and each window's frames
+can be written as soon as they are made (:func:`stream`).
+
+The face is the one given: its neutral landmarks are the first frame, and the last
+frame of every window of a ``neutral`` segment, so the identity is re-anchored at every
+rest.  A label's windows are guided by Alg. 1 (the type-I classifier, as label control);
+``free`` windows are not guided.
+
+The other joins, to compare: "replace" (Alg. 3 as printed, no reconstruction guidance),
+"handshake" (PriorMDM's DoubleTake, its first take: every window at once in one batch,
+the frames two windows share replaced by their mean after every step; memory grows with
+the length) and "concat" (independent windows end to end, each from the given face: the
+naive baseline).
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from ..config import (
+    JOIN_METHODS,
+    LONG_MAX_SECONDS,
+    NATIVE_FPS,
+    NUM_LANDMARKS,
+    SCHEDULE_FREE,
+    SCHEDULE_NEUTRAL,
+    Long,
+    with_overrides,
+)
+from ..guidance import (
+    ClassifierScore,
+    OptimisationGuidance,
+    ReconstructionGuidance,
+    chain,
+)
+from ..inpainting import KnownFrames, keep_known, neutral_faces
+from ..metrics import resample_frames
+from .fill import known_noise
+from .label import adagrad_lr
+from .loading import check_n, guided_chain, load_guide
+
+
+@dataclass(frozen=True)
+class Segment:
+    """A part of a schedule: ``what`` the face does (a label of the dataset,
+    ``neutral`` or ``free``) for ``frames`` frames at :data:`NATIVE_FPS`."""
+
+    what: str
+    frames: int
+
+
+@dataclass(frozen=True)
+class Window:
+    """One window of a long sequence: its first ``known`` frames are the end of the
+    stream so far, the next ``keep`` frames are new and kept; at the window frames
+    ``anchors`` the face is the given neutral face."""
+
+    what: str
+    known: int
+    keep: int
+    anchors: tuple
+
+
+_ITEM = re.compile(r"^\s*([^:]+?)\s*:\s*([0-9]*\.?[0-9]+)\s*s?\s*$")
+
+
+def parse_schedule(spec, labels, transition=Long.transition):
+    """The segments of a schedule "label:3s, neutral:1s, ...": each item a label of
+    ``labels``, ``neutral`` (the given face at rest) or ``free`` (unguided motion), and
+    a duration in seconds ("3s", "1.5s" or "3").  A clear error for an empty or
+    malformed schedule, an unknown label, a segment shorter than ``transition`` frames
+    (at :data:`NATIVE_FPS`) and a total over :data:`LONG_MAX_SECONDS`."""
+    if not isinstance(spec, str) or not spec.strip():
+        raise ValueError(
+            "the schedule must be a text like 'high_smile:3s, neutral:1s', got"
+            f" {spec!r}"
+        )
+    allowed = sorted(labels) + [SCHEDULE_NEUTRAL, SCHEDULE_FREE]
+    segments = []
+    for item in spec.split(","):
+        match = _ITEM.match(item)
+        if match is None:
+            raise ValueError(
+                f"cannot read the schedule item {item.strip()!r}: write WHAT:SECONDS,"
+                " e.g. 'high_smile:3s'"
+            )
+        what, seconds = match.group(1).strip("'\" "), float(match.group(2))
+        if what not in allowed:
+            raise ValueError(
+                f"unknown expression {what!r} in the schedule; allowed: "
+                + ", ".join(allowed)
+            )
+        frames = int(round(seconds * NATIVE_FPS))
+        if frames < transition:
+            raise ValueError(
+                f"the segment {item.strip()!r} lasts {frames} frames, shorter than a"
+                f" transition ({transition} frames, {transition / NATIVE_FPS:.2f} s)"
+            )
+        segments.append(Segment(what, frames))
+    total = sum(s.frames for s in segments) / NATIVE_FPS
+    if total > LONG_MAX_SECONDS:
+        raise ValueError(
+            f"the schedule lasts {total:g} s; at most {LONG_MAX_SECONDS} s are allowed"
+        )
+    return segments
+
+
+def free_schedule(seconds, transition=Long.transition):
+    """The schedule of ``seconds`` of unguided motion (``sample long --seconds``)."""
+    if (
+        isinstance(seconds, bool)
+        or not isinstance(seconds, (int, float))
+        or not 0 < seconds <= LONG_MAX_SECONDS
+    ):
+        raise ValueError(
+            f"seconds must be a number in (0, {LONG_MAX_SECONDS}], got {seconds!r}"
+        )
+    return parse_schedule(f"{SCHEDULE_FREE}:{seconds}s", (), transition)
+
+
+def plan_windows(segments, num_frames, transition, join="fill"):
+    """The windows (:class:`Window`) that make the segments' frames: the first starts
+    at the given face (anchored at frame 0); each later one knows the ``transition``
+    frames before it; a window of a ``neutral`` segment ends at the given face.  Join
+    "concat": the same frames, each window on its own from the given face."""
+    windows = []
+    for segment in segments:
+        left = segment.frames
+        while left:
+            known = transition if windows and join != "concat" else 0
+            keep = min(num_frames - known, left)
+            anchors = {0} if not windows or join == "concat" else set()
+            if segment.what == SCHEDULE_NEUTRAL:
+                anchors.add(known + keep - 1)
+            windows.append(Window(segment.what, known, keep, tuple(sorted(anchors))))
+            left -= keep
+    return windows
+
+
+def join_frames(windows):
+    """The stream frames at which a window's new frames begin after the frames it knows
+    (every window but the first): the frame pair (f - 1, f) is a join."""
+    starts = np.cumsum([0] + [w.keep for w in windows])
+    return starts[1:-1]
+
+
+def _label_guidance(what, n, diffusion, guide, settings):
+    """Alg. 1 towards label ``what`` for n rows (None for ``neutral`` and ``free``)."""
+    if what in (SCHEDULE_NEUTRAL, SCHEDULE_FREE):
+        return None
+    lr = settings.lr
+    if lr is None:
+        lr = adagrad_lr(
+            guide.dataset, settings.steps, guide.meta["training"]["num_diffusion_steps"]
+        )
+    score = ClassifierScore(guide.model, guide.class_indices([what] * n))
+    return OptimisationGuidance(score, diffusion, settings.guidance_weight, lr)
+
+
+def _known(window, n, num_frames, face, tail):
+    """The window's given frames (n, F, 68, 3) in mm and their mask (n, F): the stream's
+    last frames, then the anchors."""
+    given = np.zeros((n, num_frames, NUM_LANDMARKS, 3))
+    mask = np.zeros((n, num_frames), dtype=bool)
+    if window.known:
+        given[:, : window.known], mask[:, : window.known] = tail, True
+    for a in window.anchors:
+        given[:, a], mask[:, a] = face, True
+    return given, mask
+
+
+def _models(settings, denoiser, guide):
+    """The denoiser, its chain and the type-I guide of a long sequence."""
+    guide = guide or load_guide(settings.dataset, "I")
+    if guide.classifier_type != "I":
+        raise ValueError(
+            "a long sequence's labels are guided by a type-I classifier (labels), got"
+            f" type {guide.classifier_type!r}"
+        )
+    return guided_chain(guide, denoiser, settings)
+
+
+def _check(neutral, schedule, n, settings, overrides):
+    if not isinstance(settings, Long):
+        raise TypeError(
+            f"settings must be facelib.config.Long, got {type(settings).__name__}"
+        )
+    settings = with_overrides(settings, overrides)
+    check_n(n)
+    face = neutral_faces(neutral, n, "the neutral face")
+    if isinstance(schedule, str):
+        raise ValueError(
+            "give the schedule parsed (tasks.long.parse_schedule) with the dataset's"
+            " labels"
+        )
+    if not schedule or not all(isinstance(s, Segment) for s in schedule):
+        raise ValueError("the schedule must be a non-empty list of Segment")
+    return settings, face
+
+
+def stream(
+    neutral,
+    schedule,
+    n=1,
+    settings=Long(),
+    denoiser=None,
+    guide=None,
+    progress=True,
+    **overrides,
+):
+    """Generate n long sequences of the face ``neutral`` (68, 3) in mm (or one face
+    per sequence, (n, 68, 3)), following
+    ``schedule`` (a list of :class:`Segment`, :func:`parse_schedule`), window by
+    window: yields the new frames of each window, (n, k, 68, 3) float32 in mm at
+    :data:`NATIVE_FPS`, as soon as they are made.  Joins "fill", "replace" and "concat"
+    (``settings.join``); memory is that of one window."""
+    settings, face = _check(neutral, schedule, n, settings, overrides)
+    if settings.join == "handshake":
+        raise ValueError(
+            "the handshake generates every window at once: use long_sequence, not"
+            " stream"
+        )
+    denoiser, diffusion, guide = _models(settings, denoiser, guide)
+    num_frames = settings.num_frames
+    windows = plan_windows(schedule, num_frames, settings.transition, settings.join)
+    generator, noise = torch.Generator().manual_seed(settings.seed), known_noise(
+        settings.seed
+    )
+    tail = None  # the stream's last frames, which the next window knows
+    for window in windows:
+        given, mask = _known(window, n, num_frames, face, tail)
+        x0 = denoiser.to_model(given)
+        known = torch.as_tensor(mask).to(denoiser.device)
+        reconstruction = None
+        if settings.join == "fill" and settings.reconstruction_scale:
+            reconstruction = ReconstructionGuidance(
+                denoiser.model, diffusion, x0, known, settings.reconstruction_scale
+            )
+        inner = chain(
+            _label_guidance(window.what, n, diffusion, guide, settings), reconstruction
+        )
+        hook = KnownFrames(diffusion, x0, known, noise, inner=inner)
+        x = hook.sample(denoiser.model, generator, progress=progress)
+        out = keep_known(denoiser.to_mm(x.detach()), given, mask)
+        new = out[:, window.known : window.known + window.keep]
+        previous = new if tail is None else np.concatenate([tail, new], axis=1)
+        tail = previous[:, -settings.transition :]
+        yield new
+
+
+@dataclass
+class Handshake:
+    """The sampler hook of DoubleTake's first take over a batch of windows (n streams x
+    W windows, stream-major): ``inner`` (the rows' guidance and anchors), then the
+    frames two consecutive windows share set to their mean."""
+
+    inner: object
+    windows: list
+    n: int
+    transition: int
+
+    def __call__(self, x_hat, xt, t, out):
+        x = self.inner(x_hat, xt, t, out)
+        w, o = len(self.windows), self.transition
+        x = x.view(self.n, w, *x.shape[1:]).clone()
+        for k in range(1, w):
+            end = self.windows[k - 1].known + self.windows[k - 1].keep
+            mean = 0.5 * (x[:, k - 1, end - o : end] + x[:, k, :o])
+            x[:, k - 1, end - o : end], x[:, k, :o] = mean, mean
+        return x.view(-1, *x.shape[2:])
+
+
+class _Rows:
+    """A guidance hook applied to the chosen rows of the batch only."""
+
+    def __init__(self, guide, rows):
+        self.guide, self.rows = guide, rows
+
+    def __call__(self, x_hat, xt, t, out):
+        guided = self.guide(x_hat, xt, t, out)
+        return torch.where(self.rows[:, None, None, None], guided, x_hat)
+
+
+def _handshake(face, schedule, n, settings, denoiser, guide, progress):
+    """DoubleTake's first take: (n, frames, 68, 3) float32 in mm at NATIVE_FPS."""
+    denoiser, diffusion, guide = _models(settings, denoiser, guide)
+    num_frames, o = settings.num_frames, settings.transition
+    windows = plan_windows(schedule, num_frames, o)
+    # in a batch every window is generated at once: the shared frames are not known,
+    # only the anchors
+    rows = len(windows) * n
+    given = np.zeros((n, len(windows), num_frames, NUM_LANDMARKS, 3))
+    mask = np.zeros((n, len(windows), num_frames), dtype=bool)
+    for k, w in enumerate(windows):
+        for a in w.anchors:
+            given[:, k, a], mask[:, k, a] = face, True  # face: (n, 68, 3)
+    given, mask = given.reshape(rows, *given.shape[2:]), mask.reshape(rows, -1)
+    x0, known = denoiser.to_model(given), torch.as_tensor(mask).to(denoiser.device)
+    guides = []
+    for what in sorted({w.what for w in windows}):
+        label = _label_guidance(what, rows, diffusion, guide, settings)
+        if label is not None:
+            chosen = torch.tensor([w.what == what for w in windows] * n)
+            guides.append(_Rows(label, chosen))
+    reconstruction = (
+        ReconstructionGuidance(
+            denoiser.model, diffusion, x0, known, settings.reconstruction_scale
+        )
+        if settings.reconstruction_scale
+        else None
+    )
+    anchors = KnownFrames(
+        diffusion,
+        x0,
+        known,
+        known_noise(settings.seed),
+        inner=chain(*guides, reconstruction),
+    )
+    hook = Handshake(anchors, windows, n, o)
+    generator = torch.Generator().manual_seed(settings.seed)
+    start = anchors.start(generator)
+    x = diffusion.run(denoiser.model, start, generator, None, hook, progress=progress)
+    out = keep_known(denoiser.to_mm(x.detach()), given, mask).reshape(
+        n, len(windows), num_frames, NUM_LANDMARKS, 3
+    )
+    return np.concatenate(
+        [out[:, k, w.known : w.known + w.keep] for k, w in enumerate(windows)], axis=1
+    )
+
+
+def long_sequence(
+    neutral,
+    schedule,
+    n=1,
+    settings=Long(),
+    denoiser=None,
+    guide=None,
+    progress=True,
+    **overrides,
+):
+    """n long sequences (n, frames, 68, 3) float32 in mm at ``settings.fps`` of the face
+    ``neutral`` following ``schedule`` (:func:`stream`, or the handshake), resampled in
+    time from :data:`NATIVE_FPS`."""
+    settings, face = _check(neutral, schedule, n, settings, overrides)
+    if settings.join == "handshake":
+        x = _handshake(face, schedule, n, settings, denoiser, guide, progress)
+    else:
+        x = np.concatenate(
+            list(stream(face, schedule, n, settings, denoiser, guide, progress)),
+            axis=1,
+        )
+    return resample_fps(x, settings.fps)
+
+
+def resample_fps(sequences, fps, native=NATIVE_FPS):
+    """Sequences (n, F, ...) at ``native`` frames per second, linearly resampled to
+    ``fps`` over the same duration."""
+    x = np.asarray(sequences)
+    if fps == native:
+        return x.astype(np.float32)
+    frames = int(round((x.shape[1] - 1) * fps / native)) + 1
+    return resample_frames(x, frames)
+
+
+__all__ = [
+    "JOIN_METHODS",
+    "Segment",
+    "Window",
+    "free_schedule",
+    "join_frames",
+    "long_sequence",
+    "parse_schedule",
+    "plan_windows",
+    "resample_fps",
+    "stream",
+]
