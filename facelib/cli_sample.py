@@ -139,7 +139,10 @@ CHOICES = {
     "join": config.JOIN_METHODS,
 }
 TASK_CHOICES = {("keyframes", "method"): config.KEYFRAME_METHODS}
-INTERNAL = {("fill", "num_frames"), ("edit", "num_frames")}  # the input's length
+INPUT_LENGTH = ("fill", "edit")  # tasks whose sequences have the input's length
+# fields without an option: the input's length; a long sequence's windows have the
+# model's
+INTERNAL = {(task, "num_frames") for task in (*INPUT_LENGTH, "long")}
 ALIASES = {"num_frames": ("--length",)}
 KEYFRAMES = (
     "keyframes --constraints keys.json --out out.npz: sequences that meet landmark"
@@ -695,7 +698,7 @@ def run(args):
             )
         denoiser.model.to(device_for(args.device))
         landmarks, extra = spec.run(args, settings, denoiser)
-    if (args.task, "num_frames") in INTERNAL:  # the input's length
+    if args.task in INPUT_LENGTH:
         settings = replace(settings, num_frames=landmarks.shape[1])
     # what steered the denoiser
     guides = [name for name in used_checkpoints if name != Path(checkpoint).stem]

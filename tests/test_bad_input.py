@@ -137,8 +137,8 @@ def options(task):
     if task in TAKES_N:
         common.append(("--n", st.one_of(st.integers(max_value=0).map(str), st.integers(min_value=10 ** 6).map(str),
                                         not_int), r"--n\b"))
-    if task in ("fill", "edit"):
-        common.remove(next(o for o in common if o[0] == "--length"))  # their length is the input's
+    if task in ("fill", "edit", "long"):  # their length is the input's (long: windows of the model's)
+        common.remove(next(o for o in common if o[0] == "--length"))
     per_task = {
         "label": [("--label", unknown_name.filter(lambda s: s not in LABELS), r"label"),
                   ("--lr", bad_number, r"\blr\b"), ("--guidance-weight", bad_number, r"guidance[ _-]weight"),
