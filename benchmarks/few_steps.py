@@ -22,7 +22,8 @@ grid; Lin et al. 2024); the rows "DDIM, uniform" show the book's uniform spacing
 
 --experiment tasks: each guided task with its book defaults, then at 50 and 4 steps of
 DDIM, with the 4-step student and with the flow's Euler steps (4, 16): label control
-(the mean shift; IC accuracy, FID), filling FFM (Alg. 3 with reconstruction guidance; IC
+(the mean shift; IC accuracy, FID; also classifier-free guidance with DDIM at 50 steps
+and its distilled students of 4 and 1 steps, --samplers picks rows), filling FFM (Alg. 3 with reconstruction guidance; IC
 accuracy of the completed test sequences, error on the missing frames), geometry-
 adaptive generation (Alg. 4; type-S IC accuracy, distance of the known frame from the
 given face), keyframes (share met within 0.5 mm and smoothly, mean key error), each
@@ -204,6 +205,18 @@ TASK_SAMPLERS = [
     ("flow, Euler 4 steps", dict(sampler="flow", steps=4)),
     ("flow, Euler 16 steps", dict(sampler="flow", steps=16)),
 ]
+# label control only: classifier-free guidance, the teacher chain and its students (w
+# distilled in, Meng et al. 2023)
+CFG_SAMPLERS = [
+    (
+        "classifier-free, DDIM 50 steps",
+        dict(guidance="cfg", sampler="ddim", steps=50, spacing="trailing"),
+    ),
+    *(
+        (f"classifier-free student, {k} steps", dict(guidance="cfg", sampler="student", steps=k))
+        for k in (4, 1)
+    ),
+]
 TASK_COLUMNS = [
     "task",
     "sampler",
@@ -303,7 +316,9 @@ def task_rows(args, ev):
     ev_s = evaluation.load_evaluator("coma", "S")
     rows = []
     for task in args.tasks:
-        for name, sampler in TASK_SAMPLERS:
+        for name, sampler in TASK_SAMPLERS + (CFG_SAMPLERS if task == "label" else []):
+            if args.samplers and name not in args.samplers:
+                continue
             t0 = time.perf_counter()
             first, second = GUIDED_TASKS[task](
                 args.task_n, sampler, ev_s if task == "geometry" else ev, test
@@ -345,6 +360,12 @@ def main():
     parser.add_argument(
         "--task-n", type=int, default=48, help="tasks: sequences per row"
     )
+    parser.add_argument(
+        "--samplers",
+        nargs="+",
+        default=None,
+        help="tasks: only the rows of these samplers (default: all)",
+    )
     results.add_save_options(parser)
     args = parser.parse_args()
     results.check_save_args(args)
@@ -364,9 +385,14 @@ def main():
     everything = set(args.rows if steps_run else args.tasks) == set(
         GROUPS if steps_run else GUIDED_TASKS
     )
-    if not everything or (steps_run and args.steps):
+    if not everything or (steps_run and args.steps) or args.samplers:
         rows, provenance = results.merged_rows(args.save, rows, key_length=2)
     students = [f"student_denoiser_coma_{k}" for k in tasks.shipped_students("coma")]
+    if not steps_run:
+        students += ["denoiser_coma_cfg"] + [
+            f"student_denoiser_coma_cfg_{k}"
+            for k in tasks.shipped_students("coma", "cfg")
+        ]
     path = results.save_result(
         args.save,
         title=(

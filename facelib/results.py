@@ -526,7 +526,7 @@ def markdown_table(record, fmt="{:.2f}"):
         if isinstance(v, float):
             # small settings: 0.0003, not 0.00
             return f"{v:.2g}" if 0 < abs(v) < 0.1 else fmt.format(v)
-        return str(v)
+        return "—" if v is None else str(v)  # a measure the row has not
 
     columns, rows = list(record["columns"]), [
         [cell(v) for v in row] for row in record["rows"]

@@ -545,6 +545,80 @@ def few_steps_figure(record, figsize=(11, 3.3)):
     return fig
 
 
+def long_timeline_figure(sequence, segments, windows, fps=30, figsize=(11, 4.6)):
+    """A long sequence (frames, 68, 3) in mm at ``fps``, made window by window from a
+    schedule (chapter "Any length"): above, three measures of the face over time (the
+    inner-lip gap, the mouth width and the brow-to-lid distance, each from its value
+    at frame 0) on the schedule's segments, the joins dotted; below, the windows, the
+    frames each shares with the stream before it hatched.  ``segments`` and
+    ``windows``: tasks.long.Segment and Window lists.  Returns the figure."""
+    x = np.asarray(sequence, dtype=np.float64)
+    seconds = np.arange(len(x)) / fps
+    fig, (top, bottom) = plt.subplots(
+        2, 1, figsize=figsize, sharex=True, gridspec_kw=dict(height_ratios=(3, 1))
+    )
+    start = 0
+    for k, segment in enumerate(segments):
+        end = start + segment.frames
+        rest = segment.what in ("neutral", "free")
+        top.axvspan(
+            start / fps,
+            end / fps,
+            color="0.93" if rest else f"C{k % 10}",
+            alpha=1 if rest else 0.12,
+            lw=0,
+        )
+        top.text(
+            (start + end) / 2 / fps,
+            1.0,
+            segment.what.replace("_", " "),
+            transform=top.get_xaxis_transform(),
+            ha="center",
+            va="bottom",
+            fontsize=7,
+        )
+        start = end
+    lip = np.linalg.norm(x[:, 62] - x[:, 66], axis=-1)
+    width = np.linalg.norm(x[:, 48] - x[:, 54], axis=-1)
+    brow = np.mean(
+        [np.linalg.norm(x[:, b] - x[:, e], axis=-1) for b, e in ((19, 37), (24, 44))],
+        axis=0,
+    )
+    for values, name in (
+        (lip, "inner-lip gap"),
+        (width, "mouth width"),
+        (brow, "brow to upper lid"),
+    ):
+        top.plot(seconds, values - values[0], lw=1.1, label=name)
+    first = 0
+    for w in windows[:-1]:
+        first += w.keep
+        top.axvline(first / fps, color="0.4", lw=0.6, ls=":")
+    top.set(ylabel="change from frame 0 (mm)")
+    top.legend(fontsize=7, loc="upper right", ncol=3)
+    begin = 0
+    for k, w in enumerate(windows):
+        y = k % 2
+        bottom.barh(
+            y, w.keep / fps, left=begin / fps, height=0.7, color="C0", alpha=0.55
+        )
+        if w.known:
+            bottom.barh(
+                y,
+                w.known / fps,
+                left=(begin - w.known) / fps,
+                height=0.7,
+                color="none",
+                edgecolor="C3",
+                hatch="////",
+                lw=0.6,
+            )
+        begin += w.keep
+    bottom.set(yticks=[], xlabel="seconds", ylabel="windows")
+    fig.tight_layout()
+    return fig
+
+
 def spiral_figure(canonical, faces, spirals, vertices, radius=14.0, figsize=(10, 4.4)):
     """Spirals (SpiralNet++ neighbour orderings) of a few vertices on the template's
     canonical plane: one panel per vertex of ``vertices`` ({title: vertex index}), one

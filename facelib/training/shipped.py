@@ -71,4 +71,20 @@ SHIPPED = {
         )
         for k in (128, 64, 32, 16, 8, 4, 2, 1)
     },
+    # Issue 46: the same chain for the label-conditional denoiser, its first teacher
+    # guided with w = CFG_SCALE, which every student keeps (Meng et al. 2023)
+    **{
+        f"student_denoiser_coma_cfg_{k}": (
+            "student",
+            {
+                "teacher": (
+                    "denoiser_coma_cfg"
+                    if k == 128
+                    else f"student_denoiser_coma_cfg_{2 * k}"
+                ),
+                "teacher_steps": 2 * k,
+            },
+        )
+        for k in (128, 64, 32, 16, 8, 4, 2, 1)
+    },
 }
