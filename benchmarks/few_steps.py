@@ -213,7 +213,10 @@ CFG_SAMPLERS = [
         dict(guidance="cfg", sampler="ddim", steps=50, spacing="trailing"),
     ),
     *(
-        (f"classifier-free student, {k} steps", dict(guidance="cfg", sampler="student", steps=k))
+        (
+            f"classifier-free student, {k} step{'s' * (k > 1)}",
+            dict(guidance="cfg", sampler="student", steps=k),
+        )
         for k in (4, 1)
     ),
 ]
