@@ -183,7 +183,7 @@ def joins_experiment(args):
             ]
         )
         print(rows[-1], f"{seconds:.0f} s", flush=True)
-    checkpoints = ["denoiser_coma", "guide_coma_I", "ic_coma_I"]
+    checkpoints = ["denoiser_coma", "guide_coma_I", "guide_coma_S", "ic_coma_I"]
     return rows, checkpoints, settings, len(faces)
 
 
@@ -246,7 +246,7 @@ def length_experiment(args):
             print(rows[-1], flush=True)
             if not wanted:
                 break
-    return rows, ["denoiser_coma", "guide_coma_I"], settings, 1
+    return rows, ["denoiser_coma", "guide_coma_I", "guide_coma_S"], settings, 1
 
 
 def main():

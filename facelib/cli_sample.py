@@ -53,6 +53,11 @@ FIELD_HELP = {
     ),
     "transition": "frames each window shares with the one before (at the native rate)",
     "fps": "frames per second written",
+    "opening": (
+        "a label segment's first window is guided by the type-S classifier as this"
+        " order ('none': by the type-I classifier, as the segment's other windows)"
+    ),
+    "opening_lr": "Adagrad learning rate of a segment's first window",
     "guidance": (
         "classifier: a noisy classifier steers the unconditional denoiser (the"
         " paper's); cfg: classifier-free guidance of the label-conditional denoiser"
@@ -137,6 +142,7 @@ CHOICES = {
     "read": config.HEAD_INPUTS,
     "order": data.KIND_NAMES,
     "join": config.JOIN_METHODS,
+    "opening": data.KIND_NAMES,
 }
 TASK_CHOICES = {("keyframes", "method"): config.KEYFRAME_METHODS}
 INPUT_LENGTH = ("fill", "edit")  # tasks whose sequences have the input's length

@@ -1023,10 +1023,17 @@ class Long(Sampling):
     guidance_weight: float = GUIDANCE_WEIGHT
     # None: ADAGRAD_LR of the dataset, scaled to the steps (tasks.adagrad_lr)
     lr: float | None = None
+    # a label segment's first window sets out from where the stream is: guided by the
+    # type-S classifier as this order, at this rate (None: type I, as its other windows)
+    opening: str | None = "N2E"
+    opening_lr: float = GEOMETRY_LR
 
     def __post_init__(self):
         super().__post_init__()
         _check_choice("join", self.join, JOIN_METHODS)
+        if self.opening is not None:
+            _check_choice("opening", self.opening, ("N2E", "E2N"))
+        _check_number("opening_lr", self.opening_lr)
         _check_number("the reconstruction guidance scale", self.reconstruction_scale)
         _check_number("the guidance weight (lambda)", self.guidance_weight)
         _check_number("lr", self.lr, allow_none=True)

@@ -11,8 +11,10 @@ can be written as soon as they are made (:func:`stream`).
 
 The face is the one given: its neutral landmarks are the first frame, and the last
 frame of every window of a ``neutral`` segment, so the identity is re-anchored at every
-rest.  A label's windows are guided by Alg. 1 (the type-I classifier, as label control);
-``free`` windows are not guided.
+rest.  A label's windows are guided by Alg. 1: the first window of a segment by the
+type-S classifier as an N2E sequence (the face sets out from where the stream is, as
+Alg. 4 from its neutral face), the others by the type-I classifier; ``free`` windows are
+not guided.
 
 The other joins, to compare: "replace" (Alg. 3 as printed, no reconstruction guidance),
 "handshake" (PriorMDM's DoubleTake, its first take: every window at once in one batch,
@@ -71,6 +73,7 @@ class Window:
     known: int
     keep: int
     anchors: tuple
+    opens: bool = False  # the first window of its segment
 
 
 _ITEM = re.compile(r"^\s*([^:]+?)\s*:\s*([0-9]*\.?[0-9]+)\s*s?\s*$")
@@ -144,7 +147,10 @@ def plan_windows(segments, num_frames, transition, join="fill"):
             anchors = {0} if not windows or join == "concat" else set()
             if segment.what == SCHEDULE_NEUTRAL:
                 anchors.add(known + keep - 1)
-            windows.append(Window(segment.what, known, keep, tuple(sorted(anchors))))
+            opens = left == segment.frames
+            windows.append(
+                Window(segment.what, known, keep, tuple(sorted(anchors)), opens)
+            )
             left -= keep
     return windows
 
@@ -156,16 +162,25 @@ def join_frames(windows):
     return starts[1:-1]
 
 
-def _label_guidance(what, n, diffusion, guide, settings):
-    """Alg. 1 towards label ``what`` for n rows (None for ``neutral`` and ``free``)."""
-    if what in (SCHEDULE_NEUTRAL, SCHEDULE_FREE):
+def _label_guidance(window, n, diffusion, guides, settings):
+    """Alg. 1 towards the window's label for n rows (None for ``neutral`` and ``free``):
+    a segment's first window by the type-S classifier as ``settings.opening`` (the face
+    sets out from where the stream is, as an N2E sequence from its neutral face), its
+    other windows by the type-I classifier."""
+    if window.what in (SCHEDULE_NEUTRAL, SCHEDULE_FREE):
         return None
-    lr = settings.lr
-    if lr is None:
-        lr = adagrad_lr(
-            guide.dataset, settings.steps, guide.meta["training"]["num_diffusion_steps"]
-        )
-    score = ClassifierScore(guide.model, guide.class_indices([what] * n))
+    if window.opens and settings.opening is not None:
+        guide, lr = guides["S"], settings.opening_lr
+        label = f"{window.what} {settings.opening}"
+    else:
+        guide, lr, label = guides["I"], settings.lr, window.what
+        if lr is None:
+            lr = adagrad_lr(
+                guide.dataset,
+                settings.steps,
+                guide.meta["training"]["num_diffusion_steps"],
+            )
+    score = ClassifierScore(guide.model, guide.class_indices([label] * n))
     return OptimisationGuidance(score, diffusion, settings.guidance_weight, lr)
 
 
@@ -181,15 +196,21 @@ def _known(window, n, num_frames, face, tail):
     return given, mask
 
 
-def _models(settings, denoiser, guide):
-    """The denoiser, its chain and the type-I guide of a long sequence."""
-    guide = guide or load_guide(settings.dataset, "I")
-    if guide.classifier_type != "I":
-        raise ValueError(
-            "a long sequence's labels are guided by a type-I classifier (labels), got"
-            f" type {guide.classifier_type!r}"
-        )
-    return guided_chain(guide, denoiser, settings)
+def _models(settings, denoiser, guide, order_guide):
+    """The denoiser, its chain and the guides of a long sequence: {"I": labels, "S":
+    labels and their order}."""
+    guides = {
+        "I": guide or load_guide(settings.dataset, "I"),
+        "S": order_guide or load_guide(settings.dataset, "S"),
+    }
+    for kind, g in guides.items():
+        if g.classifier_type != kind:
+            raise ValueError(
+                f"the type-{kind} guide of a long sequence is of type"
+                f" {g.classifier_type!r}"
+            )
+        denoiser, diffusion, guides[kind] = guided_chain(g, denoiser, settings)
+    return denoiser, diffusion, guides
 
 
 def _check(neutral, schedule, n, settings, overrides):
@@ -218,6 +239,7 @@ def stream(
     denoiser=None,
     guide=None,
     progress=True,
+    order_guide=None,
     **overrides,
 ):
     """Generate n long sequences of the face ``neutral`` (68, 3) in mm (or one face
@@ -232,7 +254,7 @@ def stream(
             "the handshake generates every window at once: use long_sequence, not"
             " stream"
         )
-    denoiser, diffusion, guide = _models(settings, denoiser, guide)
+    denoiser, diffusion, guides = _models(settings, denoiser, guide, order_guide)
     num_frames = settings.num_frames
     windows = plan_windows(schedule, num_frames, settings.transition, settings.join)
     generator, noise = torch.Generator().manual_seed(settings.seed), known_noise(
@@ -249,7 +271,7 @@ def stream(
                 denoiser.model, diffusion, x0, known, settings.reconstruction_scale
             )
         inner = chain(
-            _label_guidance(window.what, n, diffusion, guide, settings), reconstruction
+            _label_guidance(window, n, diffusion, guides, settings), reconstruction
         )
         hook = KnownFrames(diffusion, x0, known, noise, inner=inner)
         x = hook.sample(denoiser.model, generator, progress=progress)
@@ -293,9 +315,9 @@ class _Rows:
         return torch.where(self.rows[:, None, None, None], guided, x_hat)
 
 
-def _handshake(face, schedule, n, settings, denoiser, guide, progress):
+def _handshake(face, schedule, n, settings, denoiser, guide, order_guide, progress):
     """DoubleTake's first take: (n, frames, 68, 3) float32 in mm at NATIVE_FPS."""
-    denoiser, diffusion, guide = _models(settings, denoiser, guide)
+    denoiser, diffusion, guides = _models(settings, denoiser, guide, order_guide)
     num_frames, o = settings.num_frames, settings.transition
     windows = plan_windows(schedule, num_frames, o)
     # in a batch every window is generated at once: the shared frames are not known,
@@ -308,12 +330,14 @@ def _handshake(face, schedule, n, settings, denoiser, guide, progress):
             given[:, k, a], mask[:, k, a] = face, True  # face: (n, 68, 3)
     given, mask = given.reshape(rows, *given.shape[2:]), mask.reshape(rows, -1)
     x0, known = denoiser.to_model(given), torch.as_tensor(mask).to(denoiser.device)
-    guides = []
-    for what in sorted({w.what for w in windows}):
-        label = _label_guidance(what, rows, diffusion, guide, settings)
+    hooks = []
+    for what, opens in sorted({(w.what, w.opens) for w in windows}):
+        label = _label_guidance(
+            Window(what, 0, 1, (), opens), rows, diffusion, guides, settings
+        )
         if label is not None:
-            chosen = torch.tensor([w.what == what for w in windows] * n)
-            guides.append(_Rows(label, chosen))
+            chosen = [(w.what, w.opens) == (what, opens) for w in windows]
+            hooks.append(_Rows(label, torch.tensor(chosen * n)))
     reconstruction = (
         ReconstructionGuidance(
             denoiser.model, diffusion, x0, known, settings.reconstruction_scale
@@ -326,7 +350,7 @@ def _handshake(face, schedule, n, settings, denoiser, guide, progress):
         x0,
         known,
         known_noise(settings.seed),
-        inner=chain(*guides, reconstruction),
+        inner=chain(*hooks, reconstruction),
     )
     hook = Handshake(anchors, windows, n, o)
     generator = torch.Generator().manual_seed(settings.seed)
@@ -348,6 +372,7 @@ def long_sequence(
     denoiser=None,
     guide=None,
     progress=True,
+    order_guide=None,
     **overrides,
 ):
     """n long sequences (n, frames, 68, 3) float32 in mm at ``settings.fps`` of the face
@@ -355,12 +380,14 @@ def long_sequence(
     time from :data:`NATIVE_FPS`."""
     settings, face = _check(neutral, schedule, n, settings, overrides)
     if settings.join == "handshake":
-        x = _handshake(face, schedule, n, settings, denoiser, guide, progress)
-    else:
-        x = np.concatenate(
-            list(stream(face, schedule, n, settings, denoiser, guide, progress)),
-            axis=1,
+        x = _handshake(
+            face, schedule, n, settings, denoiser, guide, order_guide, progress
         )
+    else:
+        made = stream(
+            face, schedule, n, settings, denoiser, guide, progress, order_guide
+        )
+        x = np.concatenate(list(made), axis=1)
     return resample_fps(x, settings.fps)
 
 
