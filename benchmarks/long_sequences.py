@@ -5,7 +5,9 @@ costs.
 Usage: python benchmarks/long_sequences.py [--experiment joins|length] [--n 8]
 [--joins fill replace handshake concat] [--minutes 1 10] [--save NAME]
 
---experiment joins (default): n streams, one per held-out test face (its neutral
+--experiment joins (default; --type-i-opening adds a row whose segments open with the
+type-I classifier, as their other windows; --joins some rows, merged into the stored
+table): n streams, one per held-out test face (its neutral
 landmarks), follow one schedule: the 12 coma labels in a shuffled order (numpy seed 0),
 each "LABEL:2s, neutral:1s" (36 s, 36 windows, n x 35 joins).  For each join method
 (config.JOIN_METHODS) and for the test split: the frame-to-frame speed (mean over
@@ -147,7 +149,11 @@ def joins_experiment(args):
         ]
     )
     print(rows[-1])
-    for join in args.joins:
+    runs = [(join, {}) for join in args.joins]
+    if args.type_i_opening:  # the first window of a segment guided as the others
+        runs.append(("fill, every window type I", dict(opening=None)))
+    for name, changed in runs:
+        join = name.split(",")[0]
         t0 = time.perf_counter()
         x = long.long_sequence(
             faces,
@@ -157,6 +163,7 @@ def joins_experiment(args):
             join=join,
             fps=long.NATIVE_FPS,
             progress=False,
+            **changed,
         )
         seconds = time.perf_counter() - t0
         plan = long.plan_windows(
@@ -169,7 +176,7 @@ def joins_experiment(args):
         )
         rows.append(
             [
-                join,
+                name,
                 len(s["speed_joins"]),
                 float(np.percentile(s["speed_joins"], 95)),
                 float(np.percentile(s["speed_inside"], 95)),
@@ -255,9 +262,14 @@ def main():
     p.add_argument("--n", type=int, default=8)
     p.add_argument(
         "--joins",
-        nargs="+",
+        nargs="*",
         default=list(config.JOIN_METHODS),
         choices=config.JOIN_METHODS,
+    )
+    p.add_argument(
+        "--type-i-opening",
+        action="store_true",
+        help="joins: also a row whose segments open with the type-I classifier",
     )
     p.add_argument("--minutes", type=float, nargs="+", default=[1, 10])
     p.add_argument("--save", default=None)
@@ -272,6 +284,9 @@ def main():
         rows, checkpoints, settings, n = length_experiment(args)
         columns, title = LENGTH_COLUMNS, "A long stream over time"
     if args.save:
+        provenance = None
+        if args.experiment == "joins" and set(args.joins) != set(config.JOIN_METHODS):
+            rows, provenance = results.merged_rows(args.save, rows)
         run = results.Run(
             checkpoints=checkpoints,
             seeds=[settings.seed],
@@ -281,7 +296,11 @@ def main():
             allow_dirty=args.allow_dirty,
             settings=(settings,),
         )
-        print(results.save_result(args.save, title, columns, rows, run))
+        print(
+            results.save_result(
+                args.save, title, columns, rows, run, row_provenance=provenance
+            )
+        )
 
 
 if __name__ == "__main__":

@@ -416,7 +416,8 @@ def _caption(frame, titles, panel_width):
 
 def animate_landmarks(sequences, titles=None, fps=12, panel_size=2.6, dpi=70, lim=None):
     """HTML GIF of landmark sequences (S, F, 68, 3) or (F, 68, 3), front view, side by
-    side."""
+    side; ``titles``: one per sequence, or a function of the frame (a caption that
+    changes, e.g. the time and what the face is asked to do)."""
     seqs = np.asarray(sequences)
     if seqs.ndim == 3:
         seqs = seqs[None]
@@ -439,9 +440,11 @@ def animate_landmarks(sequences, titles=None, fps=12, panel_size=2.6, dpi=70, li
                 xlabel="",
                 ylabel="",
             )
-            ax.set_title(
-                titles[k] if titles is not None else f"frame {f + 1}", fontsize=8
-            )
+            if callable(titles):
+                title = titles(f)
+            else:
+                title = titles[k] if titles is not None else f"frame {f + 1}"
+            ax.set_title(title, fontsize=8)
         fig.tight_layout()
 
     frames = figure_frames(
