@@ -45,6 +45,7 @@ def test_the_windows_make_every_frame_once_from_the_given_face_and_rest_on_it():
     assert all(w.known == 10 and w.known + w.keep <= 40 for w in windows[1:])
     rests = [w for w in windows if w.what == "neutral"]
     assert rests and all(w.anchors == (w.known + w.keep - 1,) for w in rests)
+    assert [w.opens for w in windows] == [True, False, True, True, False]  # a segment's first window
     assert len(long.join_frames(windows)) == len(windows) - 1
     assert long.join_frames(windows)[0] == windows[0].keep
 

@@ -305,14 +305,21 @@ class Handshake:
 
 
 class _Rows:
-    """A guidance hook applied to the chosen rows of the batch only."""
+    """A guidance hook applied to the chosen rows (B,) of the batch only: ``guide`` is
+    made for as many rows as are chosen."""
 
     def __init__(self, guide, rows):
         self.guide, self.rows = guide, rows
 
     def __call__(self, x_hat, xt, t, out):
-        guided = self.guide(x_hat, xt, t, out)
-        return torch.where(self.rows[:, None, None, None], guided, x_hat)
+        r = self.rows.to(x_hat.device)
+        part = {
+            k: v[r] if torch.is_tensor(v) and v.ndim and len(v) == len(r) else v
+            for k, v in out.items()
+        }
+        x = x_hat.clone()
+        x[r] = self.guide(x_hat[r], xt[r], t, part)
+        return x
 
 
 def _handshake(face, schedule, n, settings, denoiser, guide, order_guide, progress):
@@ -332,12 +339,16 @@ def _handshake(face, schedule, n, settings, denoiser, guide, order_guide, progre
     x0, known = denoiser.to_model(given), torch.as_tensor(mask).to(denoiser.device)
     hooks = []
     for what, opens in sorted({(w.what, w.opens) for w in windows}):
+        chosen = torch.tensor([(w.what, w.opens) == (what, opens) for w in windows] * n)
         label = _label_guidance(
-            Window(what, 0, 1, (), opens), rows, diffusion, guides, settings
+            Window(what, 0, 1, (), opens),
+            int(chosen.sum()),
+            diffusion,
+            guides,
+            settings,
         )
         if label is not None:
-            chosen = [(w.what, w.opens) == (what, opens) for w in windows]
-            hooks.append(_Rows(label, torch.tensor(chosen * n)))
+            hooks.append(_Rows(label, chosen))
     reconstruction = (
         ReconstructionGuidance(
             denoiser.model, diffusion, x0, known, settings.reconstruction_scale
