@@ -6,9 +6,8 @@ Usage: python benchmarks/long_sequences.py [--experiment joins|length] [--n 8]
 [--joins fill replace handshake concat] [--minutes 1 10] [--save NAME]
 
 --experiment joins (default; --type-i-opening adds a row whose segments open with the
-type-I classifier, as their other windows; --joins some rows, merged into the stored
-table): n streams, one per held-out test face (its neutral
-landmarks), follow one schedule: the 12 coma labels in a shuffled order (numpy seed 0),
+type-I classifier; --joins some rows, merged into the stored table): n streams, the
+held-out test faces in turn (their neutral landmarks), follow one schedule: the 12 coma labels in a shuffled order (numpy seed 0),
 each "LABEL:2s, neutral:1s" (36 s, 36 windows, n x 35 joins).  For each join method
 (config.JOIN_METHODS) and for the test split: the frame-to-frame speed (mean over
 landmarks, metrics.frame_speeds) and jerk (third difference, metrics.frame_jerks) at the
@@ -150,8 +149,8 @@ def joins_experiment(args):
     )
     print(rows[-1])
     runs = [(join, {}) for join in args.joins]
-    if args.type_i_opening:  # the first window of a segment guided as the others
-        runs.append(("fill, every window type I", dict(opening=None)))
+    if args.type_i_opening:  # a segment's first window guided by the type-I classifier
+        runs.append(("fill, segments open with type I", dict(opening=None)))
     for name, changed in runs:
         join = name.split(",")[0]
         t0 = time.perf_counter()

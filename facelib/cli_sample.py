@@ -58,6 +58,10 @@ FIELD_HELP = {
         " order ('none': by the type-I classifier, as the segment's other windows)"
     ),
     "opening_lr": "Adagrad learning rate of a segment's first window",
+    "guide_continuation": (
+        "guide a segment's later windows by the type-I classifier too (default: they"
+        " continue unguided)"
+    ),
     "guidance": (
         "classifier: a noisy classifier steers the unconditional denoiser (the"
         " paper's); cfg: classifier-free guidance of the label-conditional denoiser"

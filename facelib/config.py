@@ -1027,6 +1027,10 @@ class Long(Sampling):
     # type-S classifier as this order, at this rate (None: type I, as its other windows)
     opening: str | None = "N2E"
     opening_lr: float = GEOMETRY_LR
+    # a segment's later windows guided by the type-I classifier too (False: they
+    # continue what the first set out, unguided; guided again, a label escalates: an
+    # open mouth opens further in every window, chapter 15)
+    guide_continuation: bool = False
 
     def __post_init__(self):
         super().__post_init__()

@@ -11,10 +11,10 @@ can be written as soon as they are made (:func:`stream`).
 
 The face is the one given: its neutral landmarks are the first frame, and the last
 frame of every window of a ``neutral`` segment, so the identity is re-anchored at every
-rest.  A label's windows are guided by Alg. 1: the first window of a segment by the
-type-S classifier as an N2E sequence (the face sets out from where the stream is, as
-Alg. 4 from its neutral face), the others by the type-I classifier; ``free`` windows are
-not guided.
+rest.  The first window of a label's segment is guided by Alg. 1 with the type-S
+classifier as an N2E sequence (the face sets out from where the stream is, as Alg. 4
+from its neutral face); the segment's other windows continue it unguided, as ``free``
+windows are.
 
 The other joins, to compare: "replace" (Alg. 3 as printed, no reconstruction guidance),
 "handshake" (PriorMDM's DoubleTake, its first take: every window at once in one batch,
@@ -166,8 +166,10 @@ def _label_guidance(window, n, diffusion, guides, settings):
     """Alg. 1 towards the window's label for n rows (None for ``neutral`` and ``free``):
     a segment's first window by the type-S classifier as ``settings.opening`` (the face
     sets out from where the stream is, as an N2E sequence from its neutral face), its
-    other windows by the type-I classifier."""
+    other windows (with ``settings.guide_continuation``) by the type-I classifier."""
     if window.what in (SCHEDULE_NEUTRAL, SCHEDULE_FREE):
+        return None
+    if not window.opens and not settings.guide_continuation:
         return None
     if window.opens and settings.opening is not None:
         guide, lr = guides["S"], settings.opening_lr
