@@ -552,8 +552,8 @@ def long_timeline_figure(sequence, segments, windows, fps=30, figsize=(11, 4.6))
     """A long sequence (frames, 68, 3) in mm at ``fps``, made window by window from a
     schedule (chapter "Any length"): above, three measures of the face over time (the
     inner-lip gap, the mouth width and the brow-to-lid distance, each from its value
-    at frame 0) on the schedule's segments, the joins dotted; below, the windows, the
-    frames each shares with the stream before it hatched.  ``segments`` and
+    at the first frame) on the schedule's segments, the joins dotted; below, the
+    windows, the frames each shares with the stream before it hatched.  ``segments`` and
     ``windows``: tasks.long.Segment and Window lists.  Returns the figure."""
     x = np.asarray(sequence, dtype=np.float64)
     seconds = np.arange(len(x)) / fps
@@ -597,7 +597,7 @@ def long_timeline_figure(sequence, segments, windows, fps=30, figsize=(11, 4.6))
     for w in windows[:-1]:
         first += w.keep
         top.axvline(first / fps, color="0.4", lw=0.6, ls=":")
-    top.set(ylabel="change from frame 0 (mm)")
+    top.set(ylabel="change from the first frame (mm)")
     top.legend(fontsize=7, loc="upper right", ncol=3)
     begin = 0
     for k, w in enumerate(windows):
