@@ -655,11 +655,7 @@ def settings_of(args):
     )
     if args.task in ("label", "edit") and settings.guidance == "cfg":
         return settings  # classifier-free guidance has no classifier, no Adagrad rate
-    if args.task in ("label", "edit") and settings.lr is None:
-        settings = replace(
-            settings, lr=tasks.adagrad_lr(settings.dataset, settings.steps)
-        )
-    if args.task == "long" and settings.lr is None:
+    if args.task in ("label", "edit", "long") and settings.lr is None:
         settings = replace(
             settings, lr=tasks.adagrad_lr(settings.dataset, settings.steps)
         )

@@ -198,6 +198,15 @@ def _known(window, n, num_frames, face, tail):
     return given, mask
 
 
+def _reconstruction(settings, denoiser, diffusion, x0, known):
+    """Reconstruction guidance towards the known frames (None at scale 0)."""
+    if not settings.reconstruction_scale:
+        return None
+    return ReconstructionGuidance(
+        denoiser.model, diffusion, x0, known, settings.reconstruction_scale
+    )
+
+
 def _models(settings, denoiser, guide, order_guide):
     """The denoiser, its chain and the guides of a long sequence: {"I": labels, "S":
     labels and their order}."""
@@ -268,10 +277,8 @@ def stream(
         x0 = denoiser.to_model(given)
         known = torch.as_tensor(mask).to(denoiser.device)
         reconstruction = None
-        if settings.join == "fill" and settings.reconstruction_scale:
-            reconstruction = ReconstructionGuidance(
-                denoiser.model, diffusion, x0, known, settings.reconstruction_scale
-            )
+        if settings.join == "fill":
+            reconstruction = _reconstruction(settings, denoiser, diffusion, x0, known)
         inner = chain(
             _label_guidance(window, n, diffusion, guides, settings), reconstruction
         )
@@ -332,12 +339,13 @@ def _handshake(face, schedule, n, settings, denoiser, guide, order_guide, progre
     # in a batch every window is generated at once: the shared frames are not known,
     # only the anchors
     rows = len(windows) * n
-    given = np.zeros((n, len(windows), num_frames, NUM_LANDMARKS, 3))
-    mask = np.zeros((n, len(windows), num_frames), dtype=bool)
-    for k, w in enumerate(windows):
-        for a in w.anchors:
-            given[:, k, a], mask[:, k, a] = face, True  # face: (n, 68, 3)
-    given, mask = given.reshape(rows, *given.shape[2:]), mask.reshape(rows, -1)
+    made = [
+        _known(Window(w.what, 0, w.keep, w.anchors), n, num_frames, face, None)
+        for w in windows
+    ]
+    # stream-major: window k of stream i is row i * W + k
+    given = np.stack([g for g, _ in made], axis=1).reshape(rows, num_frames, -1, 3)
+    mask = np.stack([m for _, m in made], axis=1).reshape(rows, num_frames)
     x0, known = denoiser.to_model(given), torch.as_tensor(mask).to(denoiser.device)
     hooks = []
     for what, opens in sorted({(w.what, w.opens) for w in windows}):
@@ -351,13 +359,7 @@ def _handshake(face, schedule, n, settings, denoiser, guide, order_guide, progre
         )
         if label is not None:
             hooks.append(_Rows(label, chosen))
-    reconstruction = (
-        ReconstructionGuidance(
-            denoiser.model, diffusion, x0, known, settings.reconstruction_scale
-        )
-        if settings.reconstruction_scale
-        else None
-    )
+    reconstruction = _reconstruction(settings, denoiser, diffusion, x0, known)
     anchors = KnownFrames(
         diffusion,
         x0,
