@@ -29,7 +29,9 @@ same number of sequences.
 
 ``keyframes``: ``--n`` random keys (experiments.random_keys: the displacement of a
 mobile landmark at a frame of a real test sequence, from its subject's neutral face),
-met by each method (replace, reconstruction, both); the constraint error (mm), the share
+met by each method (replace, reconstruction, both) with replacement as Alg. 3 prints it
+(feather 0), by 'both' at more reconstruction scales (``--scale``) and with feathered
+replacement (``--feather``, inpainting.KnownFrames); the constraint error (mm), the share
 of requests within config.KEYFRAME_TOLERANCE whose keyed landmark moves into and out of
 the keyed frame no faster than the 95th percentile of that landmark's frame-to-frame
 motion in the test data, and the FID against the unconstrained samples'.  Every mean
@@ -37,8 +39,8 @@ with its 95 % bootstrap interval.
 
     python benchmarks/fine_control.py --experiment au --save fine_control_au
     python benchmarks/fine_control.py --experiment floor --save fine_control_floor
-    python benchmarks/fine_control.py --experiment keyframes --save
-    fine_control_keyframes
+    python benchmarks/fine_control.py --experiment keyframes --n 64 --scale 4 8 16
+    --feather 1 2 4 --save fine_control_keyframes
 """
 
 import argparse
@@ -49,9 +51,7 @@ import numpy as np
 from facelib import config, data, evaluation, experiments, metrics, results, tasks
 
 # tasks.AU_GUIDANCE_OFF: the same chain and face, the AU score's weight 0
-AU_GUIDANCE_OFF_ROW = (
-    "AU guidance off"
-)
+AU_GUIDANCE_OFF_ROW = "AU guidance off"
 FLOOR = (
     config.AU_MEASURABLE_FIT_ERROR
 )  # AUs whose rig fit on real sequences errs by more cannot be scored at 0.1
@@ -273,12 +273,12 @@ def keyframe_rows(args, evaluator):
             (time.perf_counter() - t0) / args.n,
         ]
     ]
-    runs = [(m, None) for m in config.KEYFRAME_METHODS] + [
-        ("both", z) for z in args.scale
-    ]
-    for method, zeta in runs:
+    # Alg. 3's replacement as printed (feather 0), then feathered (the default)
+    runs = [(m, {"feather": 0.0}) for m in config.KEYFRAME_METHODS]
+    runs += [("both", {"reconstruction_scale": z, "feather": 0.0}) for z in args.scale]
+    runs += [("both", {"feather": f}) for f in args.feather]
+    for method, extra in runs:
         t0 = time.perf_counter()
-        extra = {} if zeta is None else {"reconstruction_scale": zeta}
         x = np.concatenate(
             [
                 tasks.keyframes(
@@ -304,7 +304,14 @@ def keyframe_rows(args, evaluator):
             float(np.clip(v, 0, 100))
             for v in metrics.bootstrap_interval(lambda h: 100 * h.mean(), met)
         ]
-        name = method if zeta is None else f"{method}, zeta {zeta:g}"
+        name = ", ".join(
+            [method]
+            + [
+                f"{ {'reconstruction_scale': 'zeta'}.get(k, k)} {v:g}"
+                for k, v in extra.items()
+                if v != 0.0
+            ]
+        )
         rows.append(
             [
                 name,
@@ -358,6 +365,16 @@ def main():
         help=(
             "keyframes: more reconstruction scales zeta to try with 'both' (default:"
             " none)"
+        ),
+    )
+    parser.add_argument(
+        "--feather",
+        type=float,
+        nargs="*",
+        default=[],
+        help=(
+            "keyframes: feathers (frames) to try with 'both' at the default zeta (the"
+            " other rows replace as Alg. 3 prints it, feather 0)"
         ),
     )
     results.add_save_options(parser)

@@ -58,6 +58,10 @@ FIELD_HELP = {
         " order ('none': by the type-I classifier, as the segment's other windows)"
     ),
     "opening_lr": "Adagrad learning rate of a segment's first window",
+    "feather": (
+        "spread replacement's step to the frames next to the known ones: a Gaussian's"
+        " sigma in frames (0: Alg. 3 as printed)"
+    ),
     "guide_continuation": (
         "guide a segment's later windows by the type-I classifier too (default: they"
         " continue unguided)"

@@ -189,6 +189,21 @@ class KnownFrames:
     ignored); known: (B, F) bool, or (B, F, 68) bool to know single landmarks of a frame
     (keyframes: inpainting on coordinates instead of frames).  Deterministic through
     ``generator``.
+
+    ``feather`` (frames; 0: Alg. 3 as printed, not in the paper): replacement moves the
+    known coordinates of x_{t-1} by a step that the unknown ones next to them do not
+    take, and leaves a kink at the mask's edge.  With feather = sigma > 0 every
+    unknown coordinate is also shifted by the signal part of that step, averaged over
+    the known coordinates of its landmark nearby:
+
+        d_t(g) = sqrt(abar_{t-1}) (x_0 - x0_hat)(g)         on the known coordinates g
+        x_{t-1}(f) += sum_g w(f - g) d_t(g) / max(1, sum_g w(f - g)),
+        w(k) = exp(-k^2 / (2 sigma^2)),
+
+    a noise-free shift (x0_hat is the model's, ``out["x0"]``), full next to the known
+    frames and fading out over a few sigma.  Shifting by the whole replacement step
+    instead also spreads its noise, and makes the kinks worse (measured in the
+    chapter "Any length").
     """
 
     diffusion: GaussianDiffusion
@@ -196,6 +211,7 @@ class KnownFrames:
     known: torch.Tensor
     generator: torch.Generator
     inner: Optional[Callable] = None
+    feather: float = 0.0
 
     def noised(self, t):
         """x_t ~ q(x_t | x_0) on every frame (Eq. 3, with the correct sqrt(abar_t));
@@ -232,7 +248,23 @@ class KnownFrames:
     def __call__(self, x_hat, xt, t, out):
         if self.inner is not None:
             x_hat = self.inner(x_hat, xt, t, out)
+        if self.feather > 0:
+            x_hat = x_hat + self.feathered_shift(out["x0"], t)
         return self.merge(x_hat, self.noised(t - 1))
+
+    def feathered_shift(self, x0_hat, t):
+        """The shift of every coordinate by its known neighbours' (``feather``,
+        class docstring); its values on the known coordinates are overwritten."""
+        known = known_coordinates(self.known).to(x0_hat.dtype)
+        step = float(self.diffusion.sqrt_alphas_bar[t - 1]) * (self.x0 - x0_hat) * known
+        frames = torch.arange(
+            self.x0.shape[1], device=x0_hat.device, dtype=x0_hat.dtype
+        )
+        weights = torch.exp(
+            -0.5 * ((frames[:, None] - frames[None]) / self.feather) ** 2
+        )
+        total = torch.einsum("fg,bgld->bfld", weights, known)
+        return torch.einsum("fg,bgld->bfld", weights, step) / total.clamp_min(1.0)
 
 
 def known_coordinates(known):

@@ -114,6 +114,10 @@ not_float = st.text(max_size=8).filter(lambda s: re.fullmatch(r"\s*[+-]?(\d+\.?\
 bad_number = st.one_of(st.floats(max_value=-1e-9, allow_nan=False).map(repr),
                        st.floats(min_value=3.5e38, allow_infinity=False).map(repr),  # beyond float32
                        st.sampled_from(["nan", "inf", "-inf", "NaN", "Infinity"]), not_float)
+# a Gaussian's sigma in frames, at most the window's length
+bad_feather = st.one_of(st.floats(max_value=-1e-9, allow_nan=False).map(repr),
+                        st.floats(min_value=2001, allow_nan=False).map(repr),
+                        st.sampled_from(["nan", "inf", "-inf"]), not_float)
 steps = st.one_of(st.integers(max_value=0).map(str), st.integers(min_value=2001, max_value=10 ** 30).map(str),
                   not_int, st.floats(allow_nan=True).filter(lambda v: v != int(v) if np.isfinite(v) else True)
                   .map(repr))
@@ -180,9 +184,10 @@ def options(task):
                  ("--transition", st.one_of(st.integers(max_value=0), st.integers(min_value=21)).map(str),
                   r"transition"),
                  ("--join", unknown_name.filter(lambda s: s not in ("fill", "replace", "handshake", "concat")),
-                  r"join")],
+                  r"join"), ("--feather", bad_feather, r"feather")],
         "keyframes": [("--method", unknown_name.filter(lambda s: s not in ("replace", "reconstruction", "both")),
-                       r"method"), ("--reconstruction-scale", bad_number, r"reconstruction")],
+                       r"method"), ("--reconstruction-scale", bad_number, r"reconstruction"),
+                      ("--feather", bad_feather, r"feather")],
     }
     return common + per_task.get(task, [])
 

@@ -62,6 +62,39 @@ def test_known_frames_at_step_t_minus_1_have_the_exact_marginal_of_q(t, respaced
     assert torch.equal(hook(x_hat, None, 1, None)[:, 0], x0[:, 0])  # at t = 1, x_0|S_K is the data itself
 
 
+def test_feathered_replacement_shifts_the_neighbours_by_the_known_frames_signal_step():
+    # KnownFrames(feather=sigma): every unknown coordinate moves by sqrt(abar_{t-1}) (x_0 - x0_hat) of
+    # the known coordinates of its landmark, Gaussian-weighted by their distance in frames and
+    # averaged where the weights add up to more than 1; the known coordinates are replaced as before,
+    # and no random number is drawn for the shift.
+    diffusion = GaussianDiffusion(linear_betas(50))
+    t, sigma, frames = 7, 2.0, 9
+    x0 = torch.zeros(1, frames, 68, 3, dtype=torch.float64)
+    x0[0, 4, 10] = 1.0  # one keyed coordinate: landmark 10 at frame 4
+    known = torch.zeros(1, frames, 68, dtype=torch.bool)
+    known[0, 4, 10] = True
+    x0_hat = torch.zeros_like(x0)
+    x_hat = torch.full_like(x0, 5.0)
+    plain = inpainting.KnownFrames(diffusion, x0, known, torch.Generator().manual_seed(0))
+    soft = inpainting.KnownFrames(diffusion, x0, known, torch.Generator().manual_seed(0), feather=sigma)
+    a, b = plain(x_hat, None, t, {"x0": x0_hat}), soft(x_hat, None, t, {"x0": x0_hat})
+    assert torch.equal(a[0, 4, 10], b[0, 4, 10])  # the key: replaced as by Alg. 3, same noise drawn
+    step = np.sqrt(diffusion.alphas_bar[t - 1])
+    for f in range(frames):
+        if f != 4:
+            expected = 5.0 + step * np.exp(-0.5 * ((f - 4) / sigma) ** 2)
+            assert torch.allclose(b[0, f, 10], torch.full((3,), expected, dtype=torch.float64))
+    assert torch.equal(b[0, :, :10], a[0, :, :10]) and torch.equal(b[0, :, 11:], a[0, :, 11:])  # other landmarks
+    # a block of known frames: the frame next to it moves by the block's step, not by a sum of steps
+    block = torch.zeros(1, frames, dtype=torch.bool)
+    block[0, :4] = True
+    soft = inpainting.KnownFrames(diffusion, x0 * 0 + 1.0, block, torch.Generator().manual_seed(0), feather=sigma)
+    c = soft(x_hat, None, t, {"x0": x0_hat})
+    assert torch.allclose(c[0, 4], torch.full((68, 3), 5.0 + step, dtype=torch.float64))
+    fade = c[0, 4:, 0, 0] - 5.0  # full while the weights add up to 1 or more, then fading out
+    assert (fade <= step + 1e-12).all() and (torch.diff(fade) <= 1e-12).all() and fade[-1] < 0.1 * step
+
+
 def test_mean_imputation_and_interpolation():
     f = np.arange(10, dtype=np.float64)
     x = np.broadcast_to(f[:, None, None] * np.array([1.0, -2.0, 0.5]), (10, 68, 3))[None].copy()

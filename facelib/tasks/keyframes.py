@@ -164,7 +164,12 @@ def keyframes(
         )
     if settings.method in ("replace", "both"):
         guide = KnownFrames(
-            diffusion, x0, known, known_noise(settings.seed), inner=guide
+            diffusion,
+            x0,
+            known,
+            known_noise(settings.seed),
+            inner=guide,
+            feather=settings.feather,
         )
         out = guide.sample(denoiser.model, settings.seed, progress=progress)
     else:

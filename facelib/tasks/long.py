@@ -282,7 +282,9 @@ def stream(
         inner = chain(
             _label_guidance(window, n, diffusion, guides, settings), reconstruction
         )
-        hook = KnownFrames(diffusion, x0, known, noise, inner=inner)
+        hook = KnownFrames(
+            diffusion, x0, known, noise, inner=inner, feather=settings.feather
+        )
         x = hook.sample(denoiser.model, generator, progress=progress)
         out = keep_known(denoiser.to_mm(x.detach()), given, mask)
         new = out[:, window.known : window.known + window.keep]
