@@ -187,6 +187,9 @@ def _registration_settings(args):
     return dataclasses.replace(config.Registration(), units=args.units, **given)
 
 
+GIF_MAX_FPS = 15  # `animate --schedule`'s GIF: every k-th frame, at most this rate
+
+
 def _animate(args):
     t0 = time.perf_counter()
     settings = _registration_settings(args)
@@ -197,18 +200,38 @@ def _animate(args):
             f"--fast samples with the {config.FAST_STUDENT_STEPS}-step student; give"
             " --fast or --steps, not both"
         )
+    if (args.label is None) == (args.schedule is None):
+        raise ValueError("give --label or --schedule (one of them)")
+    if args.schedule is None and args.fps is not None:
+        raise ValueError(
+            "--fps is the frame rate of a --schedule; a --label clip is"
+            f" {config.NUM_FRAMES} frames"
+        )
+    if args.schedule is not None and (args.fast or args.order is not None):
+        raise ValueError(
+            "--fast and --order apply to a --label clip; a --schedule streams with the"
+            " chain of config.Long and opens every segment from the rest"
+        )
     sampler = {"sampler": "student"} if args.fast else {}
     steps = config.FAST_STUDENT_STEPS if args.fast else args.steps
-    steps = config.GeometryAdaptive().steps if steps is None else steps
+    if args.schedule is None:
+        steps = config.GeometryAdaptive().steps if steps is None else steps
+        what = dict(label=args.label, order=args.order or "N2E", **sampler)
+        gif_stride, gif_fps = 1, 12
+    else:
+        fps = config.Long().fps if args.fps is None else args.fps
+        steps = config.Long().steps if steps is None else steps
+        what = dict(schedule=args.schedule, fps=fps)
+        # real time, at most GIF_MAX_FPS frames a second
+        gif_stride = -(-fps // GIF_MAX_FPS)
+        gif_fps = fps / gif_stride
     anim = pipeline.animate_mesh(
         mesh,
-        args.label,
-        settings,
-        order=args.order,
+        registration_settings=settings,
         steps=steps,
         seed=args.seed,
         progress=True,
-        **sampler,
+        **what,
     )
     seconds.update(anim.seconds)
     t0 = time.perf_counter()
@@ -222,14 +245,18 @@ def _animate(args):
     frames = [
         np.concatenate(pair, axis=1)
         for pair in zip(
-            viz.mesh_frames(shown, view="front", faces=faces, colors=colors),
-            viz.mesh_frames(shown, view="three_quarter", faces=faces, colors=colors),
+            *(
+                viz.mesh_frames(
+                    shown[::gif_stride], view=view, faces=faces, colors=colors
+                )
+                for view in ("front", "three_quarter")
+            )
         )
     ]
     seconds["render GIF"] = time.perf_counter() - t0
     used = {
-        "label": args.label,
-        "order": args.order,
+        **{k: v for k, v in what.items() if k != "sampler"},
+        "sampler": "student" if args.fast else "ddpm",
         "steps": steps,
         "seed": args.seed,
         "mesh": str(args.mesh),
@@ -246,7 +273,7 @@ def _animate(args):
     written = meshio.write_animation(
         args.out,
         anim.frames,
-        viz.gif_bytes(frames, 12),
+        viz.gif_bytes(frames, gif_fps),
         extra=extra,
         faces=mesh.faces,
         template_meshes=anim.template_frames if args.keep_template else None,
@@ -569,22 +596,44 @@ def main(argv=None):
     )
     p.add_argument(
         "--label",
-        required=True,
-        help="expression label of the CoMA-like set, e.g. high_smile",
+        default=None,
+        help=(
+            "expression label of the CoMA-like set, e.g. high_smile: one clip of"
+            f" {config.NUM_FRAMES} frames"
+        ),
+    )
+    p.add_argument(
+        "--schedule",
+        default=None,
+        help=(
+            'instead of --label, expressions of any length, e.g. "high_smile:3s,'
+            ' neutral:1s, mouth_open:2s" (labels, neutral, free; the chapter "Any'
+            ' length"); the GIF plays in real time'
+        ),
+    )
+    p.add_argument(
+        "--fps",
+        type=int,
+        default=None,
+        help=(
+            "frames per second of a --schedule's OBJ frames (default: config.Long,"
+            f" {config.Long().fps}; {config.LONG_FPS_RANGE[0]}.."
+            f"{config.LONG_FPS_RANGE[1]})"
+        ),
     )
     p.add_argument(
         "--order",
-        default="N2E",
+        default=None,
         choices=["N2E", "E2N"],
-        help="neutral face first (N2E) or last (E2N)",
+        help="--label: neutral face first (N2E, the default) or last (E2N)",
     )
     p.add_argument(
         "--steps",
         type=int,
         default=None,
         help=(
-            "reverse steps per pass of Alg. 4 (default: "
-            "config.GeometryAdaptive: 100, the book's respaced chain)"
+            "reverse steps per pass of Alg. 4, or per window of a --schedule (default:"
+            " config.GeometryAdaptive, config.Long: 100, the book's respaced chain)"
         ),
     )
     p.add_argument(

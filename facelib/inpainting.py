@@ -253,18 +253,25 @@ class KnownFrames:
         return self.merge(x_hat, self.noised(t - 1))
 
     def feathered_shift(self, x0_hat, t):
-        """The shift of every coordinate by its known neighbours' (``feather``,
-        class docstring); its values on the known coordinates are overwritten."""
-        known = known_coordinates(self.known).to(x0_hat.dtype)
-        step = float(self.diffusion.sqrt_alphas_bar[t - 1]) * (self.x0 - x0_hat) * known
-        frames = torch.arange(
-            self.x0.shape[1], device=x0_hat.device, dtype=x0_hat.dtype
+        """The shift of every coordinate by its known neighbours' signal step
+        sqrt(abar_{t-1}) (x_0 - x0_hat) (``feather``, class docstring)."""
+        return self.spread(
+            float(self.diffusion.sqrt_alphas_bar[t - 1]) * (self.x0 - x0_hat)
         )
+
+    def spread(self, step):
+        """``step`` (B, F, 68, 3) of the known coordinates spread to every coordinate of
+        their landmark: sum_g w(f - g) step(g) / max(1, sum_g w(f - g)) over the known
+        g, w a Gaussian of sigma = ``feather`` frames (the known coordinates' own values
+        are overwritten by the merge)."""
+        known = known_coordinates(self.known).to(step.dtype)
+        frames = torch.arange(step.shape[1], device=step.device, dtype=step.dtype)
         weights = torch.exp(
             -0.5 * ((frames[:, None] - frames[None]) / self.feather) ** 2
         )
         total = torch.einsum("fg,bgld->bfld", weights, known)
-        return torch.einsum("fg,bgld->bfld", weights, step) / total.clamp_min(1.0)
+        shifts = torch.einsum("fg,bgld->bfld", weights, step * known)
+        return shifts / total.clamp_min(1.0)
 
 
 def known_coordinates(known):

@@ -1,7 +1,8 @@
 """End to end (paper §3.3, the end-to-end chapter): a neutral mesh -> its landmarks ->
 geometry-adaptive generation of an expression (Alg. 4, with the book's defaults,
 config.GeometryAdaptive) -> the landmark-guided deformation of the mesh
-(facelib/deformation.py).  A mesh of another topology, units or pose is first registered
+(facelib/deformation.py); or a schedule of expressions of any length streamed window by
+window (tasks.long, the chapter "Any length").  A mesh of another topology, units or pose is first registered
 (facelib/registration.py, the chapter "Your own face") and the motion carried back to
 its own vertices.
 """
@@ -39,15 +40,55 @@ def animate(
             f"unknown label {label!r}; allowed (the CoMA-like set the models were"
             f" trained on): {', '.join(COMA_LABELS)}"
         )
+    return _generate_and_deform(
+        neutral_vertices,
+        lambda face: tasks.geometry_adaptive(
+            face, label, 1, settings, denoiser, guide, progress, **overrides
+        )[0],
+        model,
+    )
+
+
+def animate_schedule(
+    neutral_vertices,
+    schedule,
+    settings=config.Long(),
+    model=None,
+    denoiser=None,
+    guide=None,
+    progress=False,
+    **overrides,
+):
+    """:func:`animate` for a schedule of any length (the chapter "Any length"): a string
+    such as "high_smile:3s, neutral:1s, mouth_open:2s" (tasks.long.parse_schedule) or
+    a list of Segments, streamed by tasks.long.long_sequence with ``settings``
+    (config.Long; the frames at ``settings.fps``). Returns (meshes (F, V, 3),
+    landmarks (F, 68, 3), seconds per stage)."""
+    settings = config.with_overrides(settings, overrides)
+    if isinstance(schedule, str):
+        guide = guide or tasks.load_guide(settings.dataset, "I")
+        schedule = tasks.long.parse_schedule(
+            schedule, guide.class_names, settings.transition
+        )
+    return _generate_and_deform(
+        neutral_vertices,
+        lambda face: tasks.long.long_sequence(
+            face, schedule, 1, settings, denoiser, guide, progress
+        )[0],
+        model,
+    )
+
+
+def _generate_and_deform(neutral_vertices, generate, model):
+    """(meshes, landmarks, seconds per stage) of a neutral mesh animated by the
+    landmark sequence that ``generate`` makes from its landmarks (68, 3)."""
     seconds = {}
     t0 = time.perf_counter()
     neutral = tpl.check_neutral_mesh(neutral_vertices)
     landmarks0 = neutral[tpl.get_template().landmark_index]
     seconds["landmarks"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    landmarks = tasks.geometry_adaptive(
-        landmarks0, label, 1, settings, denoiser, guide, progress, **overrides
-    )[0]
+    landmarks = generate(landmarks0)
     seconds["generation"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     meshes = deformation.deform(neutral, landmarks, model=model)
@@ -92,16 +133,20 @@ def is_canonical_template(mesh, tolerance_mm=1.0):
 
 def animate_mesh(
     mesh,
-    label,
+    label=None,
     registration_settings=config.Registration(),
     progress=False,
+    schedule=None,
     **overrides,
 ):
     """A reader's mesh (registration.UserMesh: any topology, units, pose) animated with
-    ``label``: registration (unless it is a canonical template mesh), :func:`animate` on
-    the fitted template, the motion carried back (Registration.transfer).  ``overrides``
-    go to :func:`animate` (order, steps, seed...).
+    ``label`` or a ``schedule``: registration (unless it is a canonical template mesh),
+    :func:`animate` (:func:`animate_schedule`) on the fitted template, the motion
+    carried back (Registration.transfer).  ``overrides`` go to :func:`animate` (order,
+    steps, seed...) or :func:`animate_schedule` (fps, steps, seed...).
     """
+    if (label is None) == (schedule is None):
+        raise ValueError("give a label or a schedule (one of them)")
     seconds = {}
     if is_canonical_template(mesh):
         fit, neutral = None, mesh.vertices
@@ -110,8 +155,10 @@ def animate_mesh(
         fit = registration.register(mesh, registration_settings)
         neutral = fit.neutral
         seconds["registration"] = time.perf_counter() - t0
-    template_frames, landmarks, stages = animate(
-        neutral, label, progress=progress, **overrides
+    template_frames, landmarks, stages = (
+        animate(neutral, label, progress=progress, **overrides)
+        if schedule is None
+        else animate_schedule(neutral, schedule, progress=progress, **overrides)
     )
     seconds.update(stages)
     t0 = time.perf_counter()

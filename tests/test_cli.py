@@ -169,6 +169,24 @@ def test_animate_writes_obj_frames_a_gif_and_the_landmarks(tmp_path, face_obj):
         assert json.loads(str(f["config"]))["label"] == "mouth_open"
 
 
+def test_animate_a_schedule_writes_real_time_frames_and_a_gif(tmp_path, face_obj):
+    out = tmp_path / "anim"
+    assert cli.main(["animate", "--mesh", str(face_obj), "--schedule", "mouth_open:1s, neutral:1s", "--fps", "20",
+                     "--steps", "2", "--out", str(out)]) == 0
+    objs = sorted(out.glob("frame_*.obj"))
+    assert len(objs) == 40  # 2 s at 20 fps
+    neutral = io.read_neutral_mesh(face_obj)
+    first, last = (trimesh.load(p, process=False, maintain_order=True).vertices for p in (objs[0], objs[-1]))
+    assert np.abs(first - neutral).max() < 0.5 and np.abs(last - neutral).max() < 0.5  # the rest ends on the face
+    with np.load(out / "landmarks.npz") as f:
+        assert f["landmarks"].shape == (1, 40, 68, 3)
+        used = json.loads(str(f["config"]))
+    assert used["schedule"] == "mouth_open:1s, neutral:1s" and used["fps"] == 20
+    from PIL import Image
+    with Image.open(out / "animation.gif") as gif:  # every 2nd frame, at 10 fps: real time
+        assert gif.n_frames == 20 and gif.info["duration"] == 100
+
+
 def test_animate_a_mesh_of_another_topology_units_and_pose(tmp_path):
     """A decimated face in cm, randomly rotated: registered, animated, written on its own vertices and triangles."""
     from facelib.face import scans
@@ -193,6 +211,13 @@ def test_animate_a_mesh_of_another_topology_units_and_pose(tmp_path):
     (["--label", "mouth_open", "--mesh", "SPHERE"], "has 162 vertices; allowed: 300 to 200,000"),
     (["--label", "mouth_open", "--steps", "0"], "steps must be a positive integer, got 0"),
     (["--label", "mouth_open", "--fast"], "give --fast or --steps, not both"),
+    ([], "give --label or --schedule"),
+    (["--label", "mouth_open", "--schedule", "high_smile:2s"], "give --label or --schedule"),
+    (["--label", "mouth_open", "--fps", "20"], "--fps is the frame rate of a --schedule"),
+    (["--schedule", "high_smile:2s", "--order", "E2N"], "--fast and --order apply to a --label"),
+    (["--schedule", "high_smile:2s", "--fps", "5"], "fps must be an integer in 10..60"),
+    (["--schedule", "wink:2s"], "unknown"),
+    (["--schedule", "high_smile:2s; neutral:1s"], "schedule"),
 ])
 def test_animate_refuses_bad_input_and_writes_nothing(tmp_path, face_obj, capsys, args, message):
     sphere = tmp_path / "sphere.obj"
