@@ -3,18 +3,25 @@ between windows are, whether each segment shows its label, and what a long strea
 costs.
 
 Usage: python benchmarks/long_sequences.py [--experiment joins|length] [--n 8]
-[--joins fill replace handshake concat] [--minutes 1 10] [--save NAME]
+[--joins fill replace handshake concat] [--stream schedule|free] [--feather 4]
+[--minutes 1 10] [--save NAME]
 
 --experiment joins (default; --type-i-opening adds a row whose segments open with the
 type-I classifier; --joins some rows, merged into the stored table): n streams, the
-held-out test faces in turn (their neutral landmarks), follow one schedule: the 12 coma labels in a shuffled order (numpy seed 0),
-each "LABEL:2s, neutral:1s" (36 s, 36 windows, n x 35 joins).  For each join method
-(config.JOIN_METHODS) and for the test split: the frame-to-frame speed (mean over
-landmarks, metrics.frame_speeds) and jerk (third difference, metrics.frame_jerks) at the
-joins against those inside windows (more than 3 frames from a join), as 95th
-percentiles and a two-sample Kolmogorov-Smirnov test; the IC accuracy of each label
-segment (the 40 frames its first window generated) against the test split's, with 95 %
-bootstrap intervals; frames made per second (one thread).
+held-out test faces in turn (their neutral landmarks), follow one schedule: the 12 coma
+labels in a shuffled order (numpy seed 0), each "LABEL:2s, neutral:1s" (36 s, 36
+windows, n x 35 joins).  For each join method (config.JOIN_METHODS) and for the test
+split: the frame-to-frame speed (mean over landmarks, metrics.frame_speeds) and jerk
+(third difference, metrics.frame_jerks) at the joins against those inside windows (more
+than 3 frames from a join), as 95th percentiles, the ratio of their medians and a
+two-sample Kolmogorov-Smirnov test; the IC accuracy of each label segment (the 40 frames
+its first window generated) against the test split's, with 95 % bootstrap intervals;
+frames made per second (one thread).
+
+--stream free: the same streams without a schedule (free motion of the same length):
+two thirds of the schedule's joins fall where a segment begins, and the face moves
+differently there with or without a join; a free stream's joins are only joins.
+--feather: rows of fill with feathered replacement (config.Long.feather).
 
 --experiment length: one stream of the first test face follows "LABEL:2s, neutral:1s"
 over the shuffled labels, repeated for the longest of --minutes; at the end of each of
@@ -26,7 +33,8 @@ end (the anchor, 0 by construction).
 
 --save NAME stores the table in results/NAME.json:
 
-    python benchmarks/long_sequences.py --save long_sequences
+    python benchmarks/long_sequences.py --type-i-opening --feather 4 --save long_sequences
+    python benchmarks/long_sequences.py --stream free --feather 4 --save long_sequences_free
     python benchmarks/long_sequences.py --experiment length --save long_sequences_length
 """
 
@@ -46,6 +54,7 @@ JOIN_COLUMNS = [
     "speed p95 at joins (mm/frame)",
     "speed p95 inside windows",
     "KS p, speed",
+    "speed median, joins / inside",
     "jerk p95 at joins (mm/frame^3)",
     "jerk p95 inside windows",
     "KS p, jerk",
@@ -110,7 +119,7 @@ def segment_windows(x, schedule, windows, num_frames):
         begin = s - first[s].known
         out.append(x[:, begin : begin + num_frames])
         labels += [segment.what] * len(x)
-    return np.concatenate(out), labels
+    return (np.concatenate(out) if out else None), labels
 
 
 def joins_experiment(args):
@@ -124,6 +133,8 @@ def joins_experiment(args):
     )
     guide = tasks.load_guide("coma", "I")
     schedule = long.parse_schedule(label_schedule(guide.class_names), guide.class_names)
+    if args.stream == "free":  # as long, with no segment beginning anywhere
+        schedule = long.free_schedule(sum(s.frames for s in schedule) / long.NATIVE_FPS)
     settings = config.Long()
     evaluator = evaluation.load_evaluator("coma", "I")
     rows = []
@@ -131,7 +142,11 @@ def joins_experiment(args):
         "speed": metrics.frame_speeds(test.landmarks).ravel(),
         "jerk": metrics.frame_jerks(test.landmarks).ravel(),
     }
-    truth = evaluator.ground_truth(intervals=True, seed=0)
+    truth = (
+        evaluator.ground_truth(intervals=True, seed=0)
+        if args.stream == "schedule"
+        else {"accuracy": None, "accuracy_ci": None}  # no segment to read
+    )
     rows.append(
         [
             "test split (real)",
@@ -140,10 +155,11 @@ def joins_experiment(args):
             float(np.percentile(real["speed"], 95)),
             None,
             None,
+            None,
             float(np.percentile(real["jerk"], 95)),
             None,
             truth["accuracy"],
-            list(truth["accuracy_ci"]),
+            truth["accuracy_ci"] and list(truth["accuracy_ci"]),
             None,
         ]
     )
@@ -151,6 +167,7 @@ def joins_experiment(args):
     runs = [(join, {}) for join in args.joins]
     if args.type_i_opening:  # a segment's first window guided by the type-I classifier
         runs.append(("fill, segments open with type I", dict(opening=None)))
+    runs += [(f"fill, feather {f:g}", dict(feather=f)) for f in args.feather]
     for name, changed in runs:
         join = name.split(",")[0]
         t0 = time.perf_counter()
@@ -170,8 +187,12 @@ def joins_experiment(args):
         )
         s = join_statistics(x, plan)
         clips, labels = segment_windows(x, schedule, plan, settings.num_frames)
-        score = evaluator.score(
-            clips, evaluator_targets(evaluator, labels), intervals=True, seed=0
+        score = (
+            evaluator.score(
+                clips, evaluator_targets(evaluator, labels), intervals=True, seed=0
+            )
+            if labels
+            else {"accuracy": None, "accuracy_ci": None}
         )
         rows.append(
             [
@@ -180,11 +201,12 @@ def joins_experiment(args):
                 float(np.percentile(s["speed_joins"], 95)),
                 float(np.percentile(s["speed_inside"], 95)),
                 float(stats.ks_2samp(s["speed_joins"], s["speed_inside"]).pvalue),
+                float(np.median(s["speed_joins"]) / np.median(s["speed_inside"])),
                 float(np.percentile(s["jerk_joins"], 95)),
                 float(np.percentile(s["jerk_inside"], 95)),
                 float(stats.ks_2samp(s["jerk_joins"], s["jerk_inside"]).pvalue),
                 score["accuracy"],
-                list(score["accuracy_ci"]),
+                score["accuracy_ci"] and list(score["accuracy_ci"]),
                 x.shape[0] * x.shape[1] / seconds,
             ]
         )
@@ -270,6 +292,22 @@ def main():
         action="store_true",
         help="joins: also a row whose segments open with the type-I classifier",
     )
+    p.add_argument(
+        "--stream",
+        choices=["schedule", "free"],
+        default="schedule",
+        help=(
+            "joins: streams that follow the labels' schedule, or free streams of the"
+            " same length (`sample long --seconds`: no segment begins at a join)"
+        ),
+    )
+    p.add_argument(
+        "--feather",
+        type=float,
+        nargs="*",
+        default=[],
+        help="joins: also rows of fill with these feathers (frames; config.Long)",
+    )
     p.add_argument("--minutes", type=float, nargs="+", default=[1, 10])
     p.add_argument("--save", default=None)
     p.add_argument("--allow-dirty", action="store_true")
@@ -278,7 +316,9 @@ def main():
     t0 = time.perf_counter()
     if args.experiment == "joins":
         rows, checkpoints, settings, n = joins_experiment(args)
-        columns, title = JOIN_COLUMNS, "Joins of long sequences"
+        columns, title = JOIN_COLUMNS, "Joins of long sequences" + (
+            ", free streams" if args.stream == "free" else ""
+        )
     else:
         rows, checkpoints, settings, n = length_experiment(args)
         columns, title = LENGTH_COLUMNS, "A long stream over time"
