@@ -26,6 +26,7 @@ from . import (
     pipeline,
     registration,
     results,
+    tasks,
     training,
     viz,
 )
@@ -187,14 +188,14 @@ def _registration_settings(args):
     return dataclasses.replace(config.Registration(), units=args.units, **given)
 
 
-GIF_MAX_FPS = 15  # `animate --schedule`'s GIF: every k-th frame, at most this rate
+# `animate --schedule`'s GIF: every k-th frame, at most this rate (GIF frame times are
+# whole hundredths of a second: 10 fps keeps 30, 20 and 60 fps streams in real time)
+GIF_MAX_FPS = 10
 
 
-def _animate(args):
-    t0 = time.perf_counter()
-    settings = _registration_settings(args)
-    mesh = registration.read_mesh(args.mesh, settings.units)
-    seconds = {"read mesh": time.perf_counter() - t0}
+def _animation_request(args):
+    """What `animate` generates, checked before any mesh is read: (keyword arguments of
+    pipeline.animate_mesh, what the landmarks file records, GIF stride and rate)."""
     if args.fast and args.steps is not None:
         raise ValueError(
             f"--fast samples with the {config.FAST_STUDENT_STEPS}-step student; give"
@@ -202,36 +203,57 @@ def _animate(args):
         )
     if (args.label is None) == (args.schedule is None):
         raise ValueError("give --label or --schedule (one of them)")
-    if args.schedule is None and args.fps is not None:
-        raise ValueError(
-            "--fps is the frame rate of a --schedule; a --label clip is"
-            f" {config.NUM_FRAMES} frames"
+    steps = config.FAST_STUDENT_STEPS if args.fast else args.steps
+    if args.schedule is None:
+        if args.fps is not None:
+            raise ValueError(
+                "--fps is the frame rate of a --schedule; a --label clip is"
+                f" {config.NUM_FRAMES} frames"
+            )
+        settings = config.GeometryAdaptive()
+        what = dict(
+            label=args.label,
+            order=args.order,  # None: config.GeometryAdaptive's (N2E for a label)
+            steps=settings.steps if steps is None else steps,
+            sampler="student" if args.fast else settings.sampler,
         )
-    if args.schedule is not None and (args.fast or args.order is not None):
+        return what, dict(what), 1, 12
+    if args.fast or args.order is not None:
         raise ValueError(
             "--fast and --order apply to a --label clip; a --schedule streams with the"
             " chain of config.Long and opens every segment from the rest"
         )
-    sampler = {"sampler": "student"} if args.fast else {}
-    steps = config.FAST_STUDENT_STEPS if args.fast else args.steps
-    if args.schedule is None:
-        steps = config.GeometryAdaptive().steps if steps is None else steps
-        what = dict(label=args.label, order=args.order or "N2E", **sampler)
-        gif_stride, gif_fps = 1, 12
-    else:
-        fps = config.Long().fps if args.fps is None else args.fps
-        steps = config.Long().steps if steps is None else steps
-        what = dict(schedule=args.schedule, fps=fps)
-        # real time, at most GIF_MAX_FPS frames a second
-        gif_stride = -(-fps // GIF_MAX_FPS)
-        gif_fps = fps / gif_stride
+    settings = config.Long()
+    settings = dataclasses.replace(
+        settings,
+        fps=settings.fps if args.fps is None else args.fps,
+        steps=settings.steps if steps is None else steps,
+    )
+    guide = tasks.load_guide(settings.dataset, "I")
+    schedule = tasks.long.parse_schedule(
+        args.schedule, guide.class_names, settings.transition
+    )
+    seconds = sum(s.frames for s in schedule) / tasks.long.NATIVE_FPS
+    if seconds > config.ANIMATE_MAX_SECONDS:
+        raise ValueError(
+            f"the schedule lasts {seconds:g} s; `animate` writes an OBJ per frame and"
+            f" takes at most {config.ANIMATE_MAX_SECONDS} s (`sample long` takes up to"
+            f" {config.LONG_MAX_SECONDS} s of landmarks)"
+        )
+    what = dict(schedule=schedule, fps=settings.fps, steps=settings.steps, guide=guide)
+    used = dict(schedule=args.schedule, fps=settings.fps, steps=settings.steps)
+    stride = -(-settings.fps // GIF_MAX_FPS)  # real time, at most GIF_MAX_FPS
+    return what, used, stride, settings.fps / stride
+
+
+def _animate(args):
+    what, used, gif_stride, gif_fps = _animation_request(args)
+    t0 = time.perf_counter()
+    settings = _registration_settings(args)
+    mesh = registration.read_mesh(args.mesh, settings.units)
+    seconds = {"read mesh": time.perf_counter() - t0}
     anim = pipeline.animate_mesh(
-        mesh,
-        registration_settings=settings,
-        steps=steps,
-        seed=args.seed,
-        progress=True,
-        **what,
+        mesh, registration_settings=settings, seed=args.seed, progress=True, **what
     )
     seconds.update(anim.seconds)
     t0 = time.perf_counter()
@@ -254,14 +276,7 @@ def _animate(args):
         )
     ]
     seconds["render GIF"] = time.perf_counter() - t0
-    used = {
-        **{k: v for k, v in what.items() if k != "sampler"},
-        "sampler": "student" if args.fast else "ddpm",
-        "steps": steps,
-        "seed": args.seed,
-        "mesh": str(args.mesh),
-        "units": mesh.units,
-    }
+    used.update(seed=args.seed, mesh=str(args.mesh), units=mesh.units)
     npz = bytes_io.BytesIO()
     np.savez(
         npz, landmarks=anim.landmarks[None].astype(np.float32), config=json.dumps(used)

@@ -59,8 +59,8 @@ FIELD_HELP = {
     ),
     "opening_lr": "Adagrad learning rate of a segment's first window",
     "feather": (
-        "spread replacement's step to the frames next to the known ones: a Gaussian's"
-        " sigma in frames (0: Alg. 3 as printed)"
+        "shift the frames next to the known ones by the known ones' gap to the model's"
+        " estimate, a Gaussian's sigma in frames (0: Alg. 3 as printed)"
     ),
     "guide_continuation": (
         "guide a segment's later windows by the type-I classifier too (default: they"

@@ -978,16 +978,22 @@ class Fill(Sampling):
 
 KEYFRAME_METHODS = ("replace", "reconstruction", "both")
 # mm, our choice: a key counts as met within this distance (and no jump); 2.5 x the
-KEYFRAME_TOLERANCE = 0.5
 # 0.2 mm std of the world's capture noise per coordinate
 # (face.sequences.Timing.noise_mm), so a key is met when the landmark is where a real
 # capture of that pose could put it
+KEYFRAME_TOLERANCE = 0.5
+# frames, our choice: "no jump" is read on the keyed landmark's speed over every frame
+# pair within this distance of the key, not only into and out of it: a jump that
+# feathering moves off the key still counts
+KEYFRAME_SPEED_RADIUS = 3
 
 
 # sigma (frames) of the feathered replacement of keyframes (inpainting.KnownFrames):
-# the best of 1, 2, 3 on 64 keys drawn apart from the benchmark's (experiments.
-# random_keys, seed 6), 98 % met smoothly against 67 % without; chapter 12
-KEYFRAME_FEATHER = 1.0
+# the smallest of the best of 1, 2, 3, 4, 6 on 64 keys drawn apart from the
+# benchmark's (results/fine_control_keyframes_choice.json: python
+# benchmarks/fine_control.py --experiment keyframes --keys-seed 6 --n 64 --feather 1 2
+# 3 4 6 --save fine_control_keyframes_choice); chapter 12
+KEYFRAME_FEATHER = 4.0
 
 
 @dataclass(frozen=True)
@@ -1023,6 +1029,9 @@ class Keyframes(Sampling):
 NATIVE_FPS = 30
 LONG_FPS_RANGE = (10, 60)  # the frame rates a long sequence is written at
 LONG_MAX_SECONDS = 3600  # one hour: 108,000 frames, 3,600 windows
+# `animate --schedule` writes an OBJ per frame (about 0.3 MB for the template): one
+# minute at 30 fps is 1,800 files
+ANIMATE_MAX_SECONDS = 60
 # how consecutive windows are joined: "fill" (the later window's first frames known,
 # Alg. 3 with the book's reconstruction guidance), "replace" (Alg. 3 as printed),
 # "handshake" (PriorMDM's DoubleTake, first take: all windows at once, their shared
@@ -1065,6 +1074,11 @@ class Long(Sampling):
         super().__post_init__()
         _check_choice("join", self.join, JOIN_METHODS)
         _check_feather(self.feather, self.num_frames)
+        if self.feather and self.join == "handshake":
+            raise ValueError(
+                "feather spreads the replacement of known frames (joins fill, replace,"
+                " concat); the handshake averages its windows: give feather 0"
+            )
         if self.opening is not None:
             _check_choice("opening", self.opening, ("N2E", "E2N"))
         _check_number("opening_lr", self.opening_lr)

@@ -129,11 +129,20 @@ def fit_floor(dataset="coma", n=30, active=0.1):
 MOBILE_LANDMARKS = (8, 19, 24, 48, 54, 57)
 
 
-def random_keys(n, seed=0, dataset="coma", landmarks=MOBILE_LANDMARKS, frames=(10, 35)):
+def random_keys(
+    n,
+    seed=0,
+    dataset="coma",
+    landmarks=MOBILE_LANDMARKS,
+    frames=(10, 35),
+    sources=False,
+):
     """n random requests [(keys, neutral (68, 3))] that real motion can meet: for a
     random test sequence of ``dataset`` (an N2E one), its subject's neutral face and one
     key, the displacement of one of ``landmarks`` at a frame in ``frames`` (first, last;
-    our choice: after the onset, before the last frames) of that sequence."""
+    our choice: after the onset, before the last frames) of that sequence.  With
+    ``sources``: (requests, the test sequences' indices), the real motion that meets
+    each."""
     test = data.load_dataset(dataset, "test")
     if not 0 < frames[0] <= frames[1] < test.landmarks.shape[1]:
         raise ValueError(
@@ -143,7 +152,8 @@ def random_keys(n, seed=0, dataset="coma", landmarks=MOBILE_LANDMARKS, frames=(1
     n2e = np.flatnonzero(test.kinds == 0)
     rng = np.random.default_rng(seed)
     requests = []
-    for i in rng.choice(n2e, n, replace=len(n2e) < n):
+    chosen = rng.choice(n2e, n, replace=len(n2e) < n)
+    for i in chosen:
         neutral = test.neutral_landmarks(int(test.subjects[i]))
         frame, landmark = int(rng.integers(frames[0], frames[1] + 1)), int(
             rng.choice(landmarks)
@@ -163,4 +173,4 @@ def random_keys(n, seed=0, dataset="coma", landmarks=MOBILE_LANDMARKS, frames=(1
                 neutral,
             )
         )
-    return requests
+    return (requests, chosen) if sources else requests

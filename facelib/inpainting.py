@@ -190,20 +190,23 @@ class KnownFrames:
     (keyframes: inpainting on coordinates instead of frames).  Deterministic through
     ``generator``.
 
-    ``feather`` (frames; 0: Alg. 3 as printed, not in the paper): replacement moves the
-    known coordinates of x_{t-1} by a step that the unknown ones next to them do not
-    take, and leaves a kink at the mask's edge.  With feather = sigma > 0 every
-    unknown coordinate is also shifted by the signal part of that step, averaged over
-    the known coordinates of its landmark nearby:
+    ``feather`` (frames; 0: Alg. 3 as printed, not in the paper): replacement draws the
+    known coordinates of x_{t-1} around sqrt(abar_{t-1}) x_0, while the model's step
+    takes the unknown ones next to them towards sqrt(abar_{t-1}) x0_hat, and the gap
+    leaves a jump at the mask's edge.  With feather = sigma > 0 every unknown coordinate
+    is also shifted by that gap of the known coordinates of its landmark nearby:
 
         d_t(g) = sqrt(abar_{t-1}) (x_0 - x0_hat)(g)         on the known coordinates g
         x_{t-1}(f) += sum_g w(f - g) d_t(g) / max(1, sum_g w(f - g)),
         w(k) = exp(-k^2 / (2 sigma^2)),
 
-    a noise-free shift (x0_hat is the model's, ``out["x0"]``), full next to the known
-    frames and fading out over a few sigma.  Shifting by the whole replacement step
-    instead also spreads its noise, and makes the kinks worse (measured in the
-    chapter "Any length").
+    d_t the difference of the means of q(x_{t-1} | x_0) and q(x_{t-1} | x0_hat), with
+    x0_hat the model's (``out["x0"]``): a noise-free shift at every step, a weighted
+    average where the known coordinates nearby weigh 1 or more together (next to a
+    block of known frames), w(k) of a single key's gap at k frames from it.  A given
+    neutral face (all landmarks of its frame known) shifts the frames after it the same
+    way.  Spreading the whole difference between the replaced and the model's x_{t-1}
+    instead also spreads the replacement's fresh noise (chapter 12, exercise 5).
     """
 
     diffusion: GaussianDiffusion
@@ -253,7 +256,7 @@ class KnownFrames:
         return self.merge(x_hat, self.noised(t - 1))
 
     def feathered_shift(self, x0_hat, t):
-        """The shift of every coordinate by its known neighbours' signal step
+        """The shift of every coordinate by its known neighbours' gaps
         sqrt(abar_{t-1}) (x_0 - x0_hat) (``feather``, class docstring)."""
         return self.spread(
             float(self.diffusion.sqrt_alphas_bar[t - 1]) * (self.x0 - x0_hat)
@@ -264,13 +267,16 @@ class KnownFrames:
         their landmark: sum_g w(f - g) step(g) / max(1, sum_g w(f - g)) over the known
         g, w a Gaussian of sigma = ``feather`` frames (the known coordinates' own values
         are overwritten by the merge)."""
-        known = known_coordinates(self.known).to(step.dtype)
+        mask = known_coordinates(self.known)
+        known = mask.to(step.dtype)
         frames = torch.arange(step.shape[1], device=step.device, dtype=step.dtype)
         weights = torch.exp(
             -0.5 * ((frames[:, None] - frames[None]) / self.feather) ** 2
         )
         total = torch.einsum("fg,bgld->bfld", weights, known)
-        shifts = torch.einsum("fg,bgld->bfld", weights, step * known)
+        # nothing of the unknown coordinates (x0 may hold anything there) enters
+        on_known = torch.where(mask, step, torch.zeros((), dtype=step.dtype))
+        shifts = torch.einsum("fg,bgld->bfld", weights, on_known)
         return shifts / total.clamp_min(1.0)
 
 

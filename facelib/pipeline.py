@@ -1,10 +1,10 @@
 """End to end (paper §3.3, the end-to-end chapter): a neutral mesh -> its landmarks ->
 geometry-adaptive generation of an expression (Alg. 4, with the book's defaults,
-config.GeometryAdaptive) -> the landmark-guided deformation of the mesh
-(facelib/deformation.py); or a schedule of expressions of any length streamed window by
-window (tasks.long, the chapter "Any length").  A mesh of another topology, units or pose is first registered
-(facelib/registration.py, the chapter "Your own face") and the motion carried back to
-its own vertices.
+config.GeometryAdaptive), or a schedule of expressions of any length streamed window
+by window (tasks.long, the chapter "Any length") -> the landmark-guided deformation of
+the mesh (facelib/deformation.py).  A mesh of another topology, units or pose is first
+registered (facelib/registration.py, the chapter "Your own face") and the motion
+carried back to its own vertices.
 """
 
 from __future__ import annotations

@@ -307,7 +307,8 @@ def gif_bytes(frames, fps=12):
         save_all=True,
         append_images=images[1:],
         loop=0,
-        duration=int(1000 / fps),
+        # GIF frame times are whole hundredths of a second
+        duration=10 * round(100 / fps),
         optimize=True,
     )
     return buf.getvalue()

@@ -216,6 +216,8 @@ def test_animate_a_mesh_of_another_topology_units_and_pose(tmp_path):
     (["--label", "mouth_open", "--fps", "20"], "--fps is the frame rate of a --schedule"),
     (["--schedule", "high_smile:2s", "--order", "E2N"], "--fast and --order apply to a --label"),
     (["--schedule", "high_smile:2s", "--fps", "5"], "fps must be an integer in 10..60"),
+    (["--schedule", "high_smile:2s", "--fps", "0"], "fps must be an integer in 10..60"),
+    (["--schedule", "high_smile:50s, neutral:11s"], "takes at most 60 s"),
     (["--schedule", "wink:2s"], "unknown"),
     (["--schedule", "high_smile:2s; neutral:1s"], "schedule"),
 ])

@@ -76,6 +76,17 @@ def test_random_keys_are_real_displacements_and_key_speeds_read_the_keyed_frame(
     assert tasks.real_speed_p95(walk, 5) == pytest.approx(0.5)
 
 
+def test_key_speeds_see_a_jump_moved_off_the_key_within_the_radius():
+    keys = [{"frame": 20, "landmark": 54, "displacement": [0.0, 10.0, 0.0]}]
+    x = np.zeros((1, 40, 68, 3))
+    x[0, 18:, 54, 1] = 3.0  # the landmark jumps between frames 17 and 18, two before the key
+    assert tasks.key_speeds(x, keys, radius=1)[0, 0] == 0.0  # into and out of the key: still
+    assert tasks.key_speeds(x, keys)[0, 0] == pytest.approx(3.0)  # config.KEYFRAME_SPEED_RADIUS = 3
+    x[0, 24:, 54, 1] = 8.0  # a jump four frames after it: outside the radius
+    assert tasks.key_speeds(x, keys)[0, 0] == pytest.approx(3.0)
+    assert tasks.key_speeds(x, keys, radius=4)[0, 0] == pytest.approx(5.0)
+
+
 def test_a_keyframe_report_meets_a_key_only_when_close_and_without_a_jump():
     real = np.zeros((2, 40, 68, 3))
     real[:, :, 54, 1] = np.arange(40) * 0.5  # real corners move 0.5 mm per frame: p95 = 0.5

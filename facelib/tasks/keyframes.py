@@ -25,7 +25,13 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from ..config import NUM_FRAMES, NUM_LANDMARKS, KEYFRAME_TOLERANCE, Keyframes
+from ..config import (
+    KEYFRAME_SPEED_RADIUS,
+    KEYFRAME_TOLERANCE,
+    NUM_FRAMES,
+    NUM_LANDMARKS,
+    Keyframes,
+)
 from ..guidance import ReconstructionGuidance
 from ..inpainting import LANDMARK_LIMIT_MM, KnownFrames, landmark_array, neutral_faces
 from .fill import known_noise
@@ -192,21 +198,19 @@ def key_errors(sequences, keys, neutral=None):
     return np.linalg.norm(x[:, frames, landmarks] - given[frames, landmarks], axis=-1)
 
 
-def key_speeds(sequences, keys):
-    """How fast each keyed landmark moves into and out of its keyed frame, the larger of
-    the two (mm/frame), (n, number of keys): a key met by a jump shows here.  Compare
-    with :func:`real_speed_p95`.
-    """
+def key_speeds(sequences, keys, radius=KEYFRAME_SPEED_RADIUS):
+    """How fast each keyed landmark moves near its keyed frame f: the largest of its
+    frame-to-frame speeds (mm/frame) over the pairs (g, g + 1) within ``radius`` frames
+    of f (radius 1: into and out of f), (n, number of keys).  A key met by a jump shows
+    here, also where the jump is moved a frame or two off the key.  Compare with
+    :func:`real_speed_p95`."""
     x = np.asarray(sequences, dtype=np.float64)
     out = np.zeros((len(x), len(keys)))
     for j, key in enumerate(keys):
         f, l = key["frame"], key["landmark"]
-        steps = [
-            np.linalg.norm(x[:, b, l] - x[:, a, l], axis=-1)
-            for a, b in ((f - 1, f), (f, f + 1))
-            if 0 <= a and b < x.shape[1]
-        ]
-        out[:, j] = np.max(steps, axis=0)
+        first, last = max(f - radius, 0), min(f + radius, x.shape[1] - 1)
+        path = x[:, first : last + 1, l]
+        out[:, j] = np.linalg.norm(np.diff(path, axis=1), axis=-1).max(axis=1)
     return out
 
 
@@ -220,9 +224,9 @@ def real_speed_p95(sequences, landmark):
 def keyframe_report(sequences, requests, real, tolerance=KEYFRAME_TOLERANCE):
     """How well sequences (n, F, 68, 3) meet n requests [(keys, neutral or None)], one
     sequence each: {"error": the largest key error of each (mm), "speed_ratio": the
-    largest speed into or out of a keyed frame over the 95th percentile of that
-    landmark's speed in ``real`` sequences, "met": error within ``tolerance`` and no
-    ratio above 1}, each an array (n,)."""
+    largest speed near a keyed frame (:func:`key_speeds`) over the 95th percentile of
+    that landmark's speed in ``real`` sequences, "met": error within ``tolerance`` and
+    no ratio above 1}, each an array (n,)."""
     x = np.asarray(sequences, dtype=np.float64)
     if len(x) != len(requests):
         raise ValueError(
