@@ -312,6 +312,12 @@ def main():
     p.add_argument("--save", default=None)
     p.add_argument("--allow-dirty", action="store_true")
     args = p.parse_args()
+    if args.experiment == "length" and (
+        args.feather or args.type_i_opening or args.stream != "schedule"
+    ):
+        p.error("--feather, --type-i-opening and --stream are options of the joins")
+    if args.stream == "free" and args.type_i_opening:
+        p.error("a free stream has no segment to open: drop --type-i-opening")
     torch.set_num_threads(1)
     t0 = time.perf_counter()
     if args.experiment == "joins":

@@ -232,11 +232,9 @@ def main():
             lambda: baselines.generate_from_text(model, texts, encoder=encoder),
             targets,
         )
-        for (
-            steps
-        ) in (
+        for steps in (
             args.steps
-        # not in the paper: the decoder's sequence re-noised and denoised (appendix A1)
+            # not in the paper: the decoder's sequence re-noised and denoised (appendix A1)
         ):
             row(
                 f"decoder + DDPM (t0={config.DECODER_START})",

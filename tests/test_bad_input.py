@@ -116,7 +116,7 @@ bad_number = st.one_of(st.floats(max_value=-1e-9, allow_nan=False).map(repr),
                        st.sampled_from(["nan", "inf", "-inf", "NaN", "Infinity"]), not_float)
 # a Gaussian's sigma in frames, at most the window's length
 bad_feather = st.one_of(st.floats(max_value=-1e-9, allow_nan=False).map(repr),
-                        st.floats(min_value=2001, allow_nan=False).map(repr),
+                        st.floats(min_value=401, allow_nan=False).map(repr),  # > the longest sequence
                         st.sampled_from(["nan", "inf", "-inf"]), not_float)
 steps = st.one_of(st.integers(max_value=0).map(str), st.integers(min_value=2001, max_value=10 ** 30).map(str),
                   not_int, st.floats(allow_nan=True).filter(lambda v: v != int(v) if np.isfinite(v) else True)
