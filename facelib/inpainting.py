@@ -206,7 +206,7 @@ class KnownFrames:
     block of known frames), w(k) of a single key's gap at k frames from it.  A given
     neutral face (all landmarks of its frame known) shifts the frames after it the same
     way.  Spreading the whole difference between the replaced and the model's x_{t-1}
-    instead also spreads the replacement's fresh noise (chapter 12, exercise 5).
+    instead also spreads the replacement's fresh noise (chapter 12, exercise 6).
     """
 
     diffusion: GaussianDiffusion
