@@ -292,7 +292,7 @@ def keyframe_rows(args, evaluator):
         args.n, seed=args.keys_seed, sources=True
     )
     real = data.load_dataset("coma", "test").landmarks
-    # the ceiling: the real motion each key was read from, measured alike
+    # a reference: the real motion each key was read from, measured the same way
     rows = [
         keyframe_row(
             "real (the keys' own sequences)",

@@ -19,7 +19,7 @@ its first window generated) against the test split's, with 95 % bootstrap interv
 frames made per second (one thread).
 
 --stream free: the same streams without a schedule (free motion of the same length):
-two thirds of the schedule's joins fall where a segment begins, and the face moves
+most of the schedule's joins fall where a segment begins, and the face moves
 differently there with or without a join; a free stream's joins are only joins.
 --feather: rows of fill with feathered replacement (config.Long.feather).
 

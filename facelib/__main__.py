@@ -233,7 +233,7 @@ def _animation_request(args):
     schedule = tasks.long.parse_schedule(
         args.schedule, guide.class_names, settings.transition
     )
-    seconds = sum(s.frames for s in schedule) / tasks.long.NATIVE_FPS
+    seconds = sum(s.frames for s in schedule) / config.NATIVE_FPS
     if seconds > config.ANIMATE_MAX_SECONDS:
         raise ValueError(
             f"the schedule lasts {seconds:g} s; `animate` writes an OBJ per frame and"

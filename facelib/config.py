@@ -1008,8 +1008,8 @@ class Keyframes(Sampling):
     dataset: str = "coma"
     method: str = "both"
     reconstruction_scale: float = RECONSTRUCTION_SCALE
-    # replacement's step spread to the keyed landmark's other frames (frames, sigma;
-    # 0: none; inpainting.KnownFrames)
+    # the keyed landmark's other frames shifted by the key's gap to the model's estimate
+    # (frames, sigma; 0: Alg. 3 as printed; inpainting.KnownFrames)
     feather: float = KEYFRAME_FEATHER
 
     def __post_init__(self):
@@ -1066,8 +1066,9 @@ class Long(Sampling):
     # continue what the first set out, unguided; guided again, a label escalates: an
     # open mouth opens further in every window, chapter 15)
     guide_continuation: bool = False
-    # the join's replacement step spread to the new frames next to the known ones
-    # (frames, sigma; 0: none; inpainting.KnownFrames)
+    # the new frames next to the known ones shifted by their gap to the model's estimate
+    # (frames, sigma; 0: none; inpainting.KnownFrames; it does not remove the joins'
+    # kink, chapter 15)
     feather: float = 0.0
 
     def __post_init__(self):
