@@ -193,8 +193,9 @@ class KnownFrames:
     ``feather`` (frames; 0: Alg. 3 as printed, not in the paper): replacement draws the
     known coordinates of x_{t-1} around sqrt(abar_{t-1}) x_0, where the model's own
     estimate would put them around sqrt(abar_{t-1}) x0_hat; the unknown ones next to
-    them follow the model, and the gap leaves a jump at the mask's edge.  With feather = sigma > 0 every unknown coordinate
-    is also shifted by that gap of the known coordinates of its landmark nearby:
+    them follow the model, and the gap leaves a jump at the mask's edge.  With
+    feather = sigma > 0 every unknown coordinate is also shifted by that gap of the
+    known coordinates of its landmark nearby:
 
         d_t(g) = sqrt(abar_{t-1}) (x_0 - x0_hat)(g)         on the known coordinates g
         x_{t-1}(f) += sum_g w(f - g) d_t(g) / max(1, sum_g w(f - g)),
