@@ -3,8 +3,8 @@ between windows are, whether each segment shows its label, and what a long strea
 costs.
 
 Usage: python benchmarks/long_sequences.py [--experiment joins|length] [--n 8]
-[--joins fill replace handshake concat] [--stream schedule|free] [--feather 4]
-[--minutes 1 10] [--save NAME]
+[--joins fill replace handshake concat] [--stream schedule|free|text] [--feather 4]
+[--text-lr 0.2] [--minutes 1 10] [--save NAME]
 
 --experiment joins (default; --type-i-opening adds a row whose segments open with the
 type-I classifier; --joins some rows, merged into the stored table): n streams, the
@@ -23,6 +23,15 @@ most of the schedule's joins fall where a segment begins, and the face moves
 differently there with or without a join; a free stream's joins are only joins.
 --feather: rows of fill with feathered replacement (config.Long.feather).
 
+--stream text: a schedule of texts in quotes on the text head's data (coma+bu, 18
+labels, its held-out faces): each label's raw text ("high smile"), "TEXT:2s,
+neutral:1s", in a shuffled order (54 s); the IC accuracy of each text segment is read
+by the coma+bu type-I IC (compare text control of single sequences,
+results/text_table2_raw.json); join fill only, unless --joins says;
+--type-i-opening adds a row whose segments open with the text said in order ("from the
+neutral face to ...", config.Long.text_opening), --text-lr rows of other Adagrad rates
+(default: text control's).
+
 --experiment length: one stream of the first test face follows "LABEL:2s, neutral:1s"
 over the shuffled labels, repeated for the longest of --minutes; at the end of each of
 --minutes: frames made per second so far, the peak resident memory above the loaded
@@ -35,6 +44,7 @@ end (the anchor, 0 by construction).
 
     python benchmarks/long_sequences.py --type-i-opening --feather 4 --save long_sequences
     python benchmarks/long_sequences.py --stream free --feather 4 --save long_sequences_free
+    python benchmarks/long_sequences.py --stream text --type-i-opening --save long_sequences_text
     python benchmarks/long_sequences.py --experiment length --save long_sequences_length
 """
 
@@ -46,6 +56,7 @@ import torch
 from scipy import stats
 
 from facelib import config, data, evaluation, metrics, results, tasks
+from facelib.descriptions import raw_text
 from facelib.tasks import long
 
 JOIN_COLUMNS = [
@@ -72,10 +83,12 @@ LENGTH_COLUMNS = [
 ]
 
 
-def label_schedule(labels, seconds=2, rest=1, seed=0):
-    """Every label once in a shuffled order, each followed by a rest."""
+def label_schedule(labels, seconds=2, rest=1, seed=0, texts=False):
+    """Every label once in a shuffled order, each followed by a rest (``texts``: each
+    label's raw text in quotes)."""
     order = np.random.default_rng(seed).permutation(sorted(labels))
-    return ", ".join(f"{y}:{seconds}s, neutral:{rest}s" for y in order)
+    said = [f'"{raw_text(y)}"' if texts else y for y in order]
+    return ", ".join(f"{y}:{seconds}s, neutral:{rest}s" for y in said)
 
 
 def _memory_kib(field):
@@ -103,9 +116,9 @@ def join_statistics(x, windows, radius=3):
     }
 
 
-def segment_windows(x, schedule, windows, num_frames):
-    """The 40 frames (n, F, 68, 3) of each label segment that its first window made,
-    and their labels."""
+def segment_windows(x, schedule, windows, num_frames, label_of=None):
+    """The 40 frames (n, F, 68, 3) of each label (or text) segment that its first
+    window made, and their labels (``label_of``: {text: label})."""
     starts = np.cumsum([0] + [s.frames for s in schedule])[:-1]
     first = dict()
     position = 0
@@ -114,16 +127,23 @@ def segment_windows(x, schedule, windows, num_frames):
         position += w.keep
     out, labels = [], []
     for s, segment in zip(starts, schedule):
-        if segment.what in (config.SCHEDULE_NEUTRAL, config.SCHEDULE_FREE):
+        if not segment.text and segment.what in (
+            config.SCHEDULE_NEUTRAL,
+            config.SCHEDULE_FREE,
+        ):
             continue
         begin = s - first[s].known
         out.append(x[:, begin : begin + num_frames])
-        labels += [segment.what] * len(x)
+        label = label_of[segment.what] if segment.text else segment.what
+        labels += [label] * len(x)
     return (np.concatenate(out) if out else None), labels
 
 
 def joins_experiment(args):
-    test = data.load_dataset("coma", "test")
+    settings = config.Long()
+    texts = args.stream == "text"
+    dataset = settings.text_dataset if texts else settings.dataset
+    test = data.load_dataset(dataset, "test")
     subjects = np.unique(test.subjects)  # the held-out faces, in turn
     faces = np.stack(
         [
@@ -131,12 +151,17 @@ def joins_experiment(args):
             for i in range(args.n)
         ]
     )
-    guide = tasks.load_guide("coma", "I")
-    schedule = long.parse_schedule(label_schedule(guide.class_names), guide.class_names)
+    labels = test.class_names("I")
+    guides = (
+        dict(text_head=tasks.load_text_head(dataset))
+        if texts
+        else dict(guide=tasks.load_guide(dataset, "I"))
+    )
+    schedule = long.parse_schedule(label_schedule(labels, texts=texts), labels)
+    label_of = {raw_text(y): y for y in labels}
     if args.stream == "free":  # as long, with no segment beginning anywhere
         schedule = long.free_schedule(sum(s.frames for s in schedule) / long.NATIVE_FPS)
-    settings = config.Long()
-    evaluator = evaluation.load_evaluator("coma", "I")
+    evaluator = evaluation.load_evaluator(dataset, "I")
     rows = []
     real = {
         "speed": metrics.frame_speeds(test.landmarks).ravel(),
@@ -144,7 +169,7 @@ def joins_experiment(args):
     }
     truth = (
         evaluator.ground_truth(intervals=True, seed=0)
-        if args.stream == "schedule"
+        if args.stream != "free"
         else {"accuracy": None, "accuracy_ci": None}  # no segment to read
     )
     rows.append(
@@ -165,9 +190,12 @@ def joins_experiment(args):
     )
     print(rows[-1])
     runs = [(join, {}) for join in args.joins]
-    if args.type_i_opening:  # a segment's first window guided by the type-I classifier
+    if args.type_i_opening and texts:  # the opening said in order, as type S does
+        runs.append(("fill, texts said in order (N2E)", dict(text_opening="N2E")))
+    elif args.type_i_opening:  # a segment's first window guided as its others would be
         runs.append(("fill, segments open with type I", dict(opening=None)))
     runs += [(f"fill, feather {f:g}", dict(feather=f)) for f in args.feather]
+    runs += [(f"fill, text lr {r:g}", dict(text_lr=r)) for r in args.text_lr]
     for name, changed in runs:
         join = name.split(",")[0]
         t0 = time.perf_counter()
@@ -175,10 +203,10 @@ def joins_experiment(args):
             faces,
             schedule,
             len(faces),
-            guide=guide,
             join=join,
             fps=long.NATIVE_FPS,
             progress=False,
+            **guides,
             **changed,
         )
         seconds = time.perf_counter() - t0
@@ -186,12 +214,14 @@ def joins_experiment(args):
             schedule, settings.num_frames, settings.transition, join
         )
         s = join_statistics(x, plan)
-        clips, labels = segment_windows(x, schedule, plan, settings.num_frames)
+        clips, targets = segment_windows(
+            x, schedule, plan, settings.num_frames, label_of
+        )
         score = (
             evaluator.score(
-                clips, evaluator_targets(evaluator, labels), intervals=True, seed=0
+                clips, evaluator_targets(evaluator, targets), intervals=True, seed=0
             )
-            if labels
+            if targets
             else {"accuracy": None, "accuracy_ci": None}
         )
         rows.append(
@@ -211,7 +241,12 @@ def joins_experiment(args):
             ]
         )
         print(rows[-1], f"{seconds:.0f} s", flush=True)
-    checkpoints = ["denoiser_coma", "guide_coma_I", "guide_coma_S", "ic_coma_I"]
+    checkpoints = (
+        [f"denoiser_{dataset}", f"guide_{dataset}_text", f"ic_{dataset}_I"]
+        if texts
+        else [f"denoiser_{dataset}", f"guide_{dataset}_I", f"guide_{dataset}_S"]
+        + [f"ic_{dataset}_I"]
+    )
     return rows, checkpoints, settings, len(faces)
 
 
@@ -284,8 +319,9 @@ def main():
     p.add_argument(
         "--joins",
         nargs="*",
-        default=list(config.JOIN_METHODS),
+        default=None,
         choices=config.JOIN_METHODS,
+        help="joins: the rows (default: every join; fill only for --stream text)",
     )
     p.add_argument(
         "--type-i-opening",
@@ -294,11 +330,12 @@ def main():
     )
     p.add_argument(
         "--stream",
-        choices=["schedule", "free"],
+        choices=["schedule", "free", "text"],
         default="schedule",
         help=(
-            "joins: streams that follow the labels' schedule, or free streams of the"
-            " same length (`sample long --seconds`: no segment begins at a join)"
+            "joins: streams that follow the labels' schedule, free streams of the"
+            " same length (`sample long --seconds`: no segment begins at a join), or"
+            " a schedule of texts in quotes (coma+bu)"
         ),
     )
     p.add_argument(
@@ -308,6 +345,13 @@ def main():
         default=[],
         help="joins: also rows of fill with these feathers (frames; config.Long)",
     )
+    p.add_argument(
+        "--text-lr",
+        type=float,
+        nargs="*",
+        default=[],
+        help="--stream text: also rows of these Adagrad rates (config.Long.text_lr)",
+    )
     p.add_argument("--minutes", type=float, nargs="+", default=[1, 10])
     p.add_argument("--save", default=None)
     p.add_argument("--allow-dirty", action="store_true")
@@ -316,21 +360,35 @@ def main():
         args.feather or args.type_i_opening or args.stream != "schedule"
     ):
         p.error("--feather, --type-i-opening and --stream are options of the joins")
+    if args.text_lr and args.stream != "text":
+        p.error("--text-lr is an option of --stream text")
     if args.stream == "free" and args.type_i_opening:
         p.error("a free stream has no segment to open: drop --type-i-opening")
+    if args.joins is None:
+        args.joins = ["fill"] if args.stream == "text" else list(config.JOIN_METHODS)
     torch.set_num_threads(1)
     t0 = time.perf_counter()
     if args.experiment == "joins":
         rows, checkpoints, settings, n = joins_experiment(args)
-        columns, title = JOIN_COLUMNS, "Joins of long sequences" + (
-            ", free streams" if args.stream == "free" else ""
+        columns, title = (
+            JOIN_COLUMNS,
+            "Joins of long sequences"
+            + {
+                "schedule": "",
+                "free": ", free streams",
+                "text": ", a schedule of texts",
+            }[args.stream],
         )
     else:
         rows, checkpoints, settings, n = length_experiment(args)
         columns, title = LENGTH_COLUMNS, "A long stream over time"
     if args.save:
         provenance = None
-        if args.experiment == "joins" and set(args.joins) != set(config.JOIN_METHODS):
+        if (
+            args.experiment == "joins"
+            and set(args.joins) != set(config.JOIN_METHODS)
+            and args.stream != "text"
+        ):
             rows, provenance = results.merged_rows(args.save, rows)
         run = results.Run(
             checkpoints=checkpoints,

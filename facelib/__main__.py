@@ -229,10 +229,7 @@ def _animation_request(args):
         fps=settings.fps if args.fps is None else args.fps,
         steps=settings.steps if steps is None else steps,
     )
-    guide = tasks.load_guide(settings.dataset, "I")
-    schedule = tasks.long.parse_schedule(
-        args.schedule, guide.class_names, settings.transition
-    )
+    schedule = tasks.long.read_schedule(args.schedule, settings)
     seconds = sum(s.frames for s in schedule) / config.NATIVE_FPS
     if seconds > config.ANIMATE_MAX_SECONDS:
         raise ValueError(
@@ -240,7 +237,7 @@ def _animation_request(args):
             f" takes at most {config.ANIMATE_MAX_SECONDS} s (`sample long` takes up to"
             f" {config.LONG_MAX_SECONDS} s of landmarks)"
         )
-    what = dict(schedule=schedule, fps=settings.fps, steps=settings.steps, guide=guide)
+    what = dict(schedule=schedule, fps=settings.fps, steps=settings.steps)
     used = dict(schedule=args.schedule, fps=settings.fps, steps=settings.steps)
     stride = -(-settings.fps // GIF_MAX_FPS)  # real time, at most GIF_MAX_FPS
     return what, used, stride, settings.fps / stride

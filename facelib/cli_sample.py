@@ -58,6 +58,21 @@ FIELD_HELP = {
         " order ('none': by the type-I classifier, as the segment's other windows)"
     ),
     "opening_lr": "Adagrad learning rate of a segment's first window",
+    "text_dataset": (
+        "the data of a schedule with a text: its denoiser and text head (labels read"
+        " as their raw text)"
+    ),
+    "text_opening": (
+        "a text segment's first window guided by its text said in this order ('from"
+        " the neutral face to ...'; 'none': as written)"
+    ),
+    "text_guidance_weight": (
+        "lambda of Alg. 2 for a schedule's texts ('none': text control's)"
+    ),
+    "text_lr": (
+        "Adagrad learning rate of a schedule's texts ('none': text control's for the"
+        " steps)"
+    ),
     "feather": (
         "shift the frames next to the known ones by the known ones' gap to the model's"
         " estimate, a Gaussian's sigma in frames (0: Alg. 3 as printed)"
@@ -151,6 +166,7 @@ CHOICES = {
     "order": data.KIND_NAMES,
     "join": config.JOIN_METHODS,
     "opening": data.KIND_NAMES,
+    "text_opening": data.KIND_NAMES,
 }
 TASK_CHOICES = {("keyframes", "method"): config.KEYFRAME_METHODS}
 INPUT_LENGTH = ("fill", "edit")  # tasks whose sequences have the input's length
@@ -167,8 +183,9 @@ KEYFRAMES = (
     " face"
 )
 LONG = (
-    "long --schedule 'high_smile:3s, neutral:1s' --neutral face.npz --out long.npz:"
-    " one sequence of any length, made window by window (each the model's length,"
+    "long --schedule 'high_smile:3s, neutral:1s, \"a broad grin\":2s' --neutral"
+    " face.npz --out long.npz: one sequence of any length, made window by window"
+    " (each the model's length,"
     " overlapping the one before by --transition frames, joined by --join) at"
     f" {config.NATIVE_FPS} frames per second and written at --fps"
     f" ({config.LONG_FPS_RANGE[0]}..{config.LONG_FPS_RANGE[1]}); at most"
@@ -274,17 +291,22 @@ def _keyframes(args, s, den):
     return tasks.keyframes(keys, args.n, neutral, s, den), {}
 
 
+def _long_dataset(args, s):
+    """A schedule with a text runs on the text head's data."""
+    texts = args.schedule is not None and tasks.long.has_text(args.schedule)
+    return s.text_dataset if texts else s.dataset
+
+
 def _long(args, s, den):
     if (args.schedule is None) == (args.seconds is None):
         raise ValueError("give either --schedule or --seconds (not both)")
     face = _neutral(args.neutral)
-    guide = tasks.load_guide(s.dataset, "I")
     schedule = (
-        tasks.long.parse_schedule(args.schedule, guide.class_names, s.transition)
+        tasks.long.read_schedule(args.schedule, s)
         if args.schedule is not None
         else tasks.long.free_schedule(args.seconds, s.transition)
     )
-    x = tasks.long.long_sequence(face, schedule, args.n, s, den, guide)
+    x = tasks.long.long_sequence(face, schedule, args.n, s, den)
     return x, {
         "schedule": json.dumps([asdict(segment) for segment in schedule]),
         "native_fps": tasks.long.NATIVE_FPS,
@@ -321,6 +343,9 @@ class Task:
     in_paper: bool = True  # --paper: the paper's printed algorithm
     takes_n: bool = True
     usage: str | None = None
+    # (args, settings) -> the data of the denoiser, when the inputs decide it (None:
+    # settings.dataset)
+    dataset: Callable | None = None
 
 
 TASKS = {
@@ -451,8 +476,10 @@ TASKS = {
                     default=None,
                     help=(
                         "what the face does and for how long, e.g. 'high_smile:3s,"
-                        " neutral:1s, mouth_open:2s': labels of the dataset, neutral"
-                        " (the given face at rest) or free (unguided), seconds each"
+                        ' neutral:1s, "a broad grin":2s\': labels of the dataset,'
+                        " neutral (the given face at rest), free (unguided) or a text"
+                        " in quotes (then on --text-dataset, every segment by Alg."
+                        " 2), seconds each"
                     ),
                 ),
             ),
@@ -478,6 +505,7 @@ TASKS = {
         ),
         in_paper=True,
         usage=LONG,
+        dataset=_long_dataset,
     ),
     "keyframes": Task(
         "chosen landmarks at chosen frames, a natural sequence around them (not in the"
@@ -678,6 +706,20 @@ def settings_of(args):
         settings = replace(
             settings, lr=tasks.text_lr(settings.steps, score=settings.score)
         )
+    if args.task == "long":
+        settings = replace(
+            settings,
+            text_guidance_weight=(
+                tasks.text_guidance_weight()
+                if settings.text_guidance_weight is None
+                else settings.text_guidance_weight
+            ),
+            text_lr=(
+                tasks.text_lr(settings.steps)
+                if settings.text_lr is None
+                else settings.text_lr
+            ),
+        )
     return settings
 
 
@@ -696,15 +738,16 @@ def run(args):
         )
     settings, spec = settings_of(args), TASKS[args.task]
     cfg = getattr(settings, "guidance", None) == "cfg"
+    dataset = spec.dataset(args, settings) if spec.dataset else settings.dataset
     checkpoint = args.checkpoint or tasks.denoiser_name(
-        settings.dataset, settings.sampler, settings.steps, "cfg" if cfg else None
+        dataset, settings.sampler, settings.steps, "cfg" if cfg else None
     )
     with checkpoints.recording() as used_checkpoints:
         if args.checkpoint is not None or not cfg:
             denoiser = tasks.load_denoiser(checkpoint)
         else:
             denoiser = tasks.load_conditional_denoiser(
-                settings.dataset, settings.sampler, settings.steps
+                dataset, settings.sampler, settings.steps
             )
         denoiser.model.to(device_for(args.device))
         landmarks, extra = spec.run(args, settings, denoiser)

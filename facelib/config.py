@@ -1070,6 +1070,17 @@ class Long(Sampling):
     # (frames, sigma; 0: none; inpainting.KnownFrames; it does not remove the joins'
     # kink, chapter 15)
     feather: float = 0.0
+    # a schedule with a text ("'a broad grin':2s") runs on the text head's data: its
+    # denoiser, and Alg. 2 for every segment, a label read as its raw text (no label
+    # classifier is trained on it)
+    text_dataset: str = TEXT_DATASET
+    # a text segment's first window guided by its text said in this order ("from the
+    # neutral face to ..."; None: as written, which shows the text more often, chapter
+    # 15)
+    text_opening: str | None = None
+    # lambda and the Adagrad rate of the text segments (None: text control's)
+    text_guidance_weight: float | None = None
+    text_lr: float | None = None
 
     def __post_init__(self):
         super().__post_init__()
@@ -1082,10 +1093,16 @@ class Long(Sampling):
             )
         if self.opening is not None:
             _check_choice("opening", self.opening, ("N2E", "E2N"))
+        if self.text_opening is not None:
+            _check_choice("text_opening", self.text_opening, ("N2E", "E2N"))
         _check_number("opening_lr", self.opening_lr)
         _check_number("the reconstruction guidance scale", self.reconstruction_scale)
         _check_number("the guidance weight (lambda)", self.guidance_weight)
         _check_number("lr", self.lr, allow_none=True)
+        _check_number(
+            "the text guidance weight", self.text_guidance_weight, allow_none=True
+        )
+        _check_number("text_lr", self.text_lr, allow_none=True)
         low, high = LONG_FPS_RANGE
         if (
             isinstance(self.fps, bool)

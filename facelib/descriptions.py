@@ -527,6 +527,14 @@ def enriched_texts(label, kind, split="train"):
     )
 
 
+def in_order(text, kind):
+    """Any description said in an order (N2E / E2N) by the first train template: "a
+    broad grin" -> "from the neutral face to a broad grin" (N2E)."""
+    if kind not in KIND_NAMES:
+        raise ValueError(f"kind must be one of {KIND_NAMES}, got {kind!r}")
+    return ENRICHED_TEMPLATES["train"][0][KIND_NAMES.index(kind)].format(x=text)
+
+
 def descriptions(label, kind, split="train"):
     """Every description of a sequence of ``label`` performed in order ``kind`` (N2E /
     E2N): its phrasings (the raw-text task) and its enriched sentences (the

@@ -60,16 +60,13 @@ def animate_schedule(
     **overrides,
 ):
     """:func:`animate` for a schedule of any length (the chapter "Any length"): a string
-    such as "high_smile:3s, neutral:1s, mouth_open:2s" (tasks.long.parse_schedule) or
+    such as "high_smile:3s, neutral:1s, 'a broad grin':2s" (tasks.long.read_schedule) or
     a list of Segments, streamed by tasks.long.long_sequence with ``settings``
     (config.Long; the frames at ``settings.fps``). Returns (meshes (F, V, 3),
     landmarks (F, 68, 3), seconds per stage)."""
     settings = config.with_overrides(settings, overrides)
     if isinstance(schedule, str):
-        guide = guide or tasks.load_guide(settings.dataset, "I")
-        schedule = tasks.long.parse_schedule(
-            schedule, guide.class_names, settings.transition
-        )
+        schedule = tasks.long.read_schedule(schedule, settings)
     return _generate_and_deform(
         neutral_vertices,
         lambda face: tasks.long.long_sequence(

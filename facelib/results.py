@@ -511,14 +511,28 @@ def _plain(value):
     return value
 
 
-def markdown_table(record, fmt="{:.2f}"):
+def markdown_table(record, fmt="{:.2f}", columns=None):
     """A stored result as a Markdown table under a line saying it is stored: its command
     and date.
 
     Numbers are formatted with ``fmt`` (those below 0.1 with two significant digits).  A
     column of 95 % intervals ([low, high] entries) is merged into the column before it,
-    "value [low, high]", so that wide tables fit the page.
+    "value [low, high]", so that wide tables fit the page.  ``columns``: only these of
+    the record's columns, in this order (None: all).
     """
+    if columns is not None:
+        unknown = [c for c in columns if c not in record["columns"]]
+        if unknown:
+            raise ValueError(
+                f"{record['name']} has no column {unknown[0]!r}; its columns:"
+                f" {record['columns']}"
+            )
+        keep = [record["columns"].index(c) for c in columns]
+        record = dict(
+            record,
+            columns=list(columns),
+            rows=[[row[k] for k in keep] for row in record["rows"]],
+        )
 
     def cell(v):
         if _is_interval(v):

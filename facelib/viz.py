@@ -555,7 +555,8 @@ def long_timeline_figure(sequence, segments, windows, fps=30, figsize=(11, 4.6))
     inner-lip gap, the mouth width and the brow-to-lid distance, each from its value
     at the first frame) on the schedule's segments, the joins dotted; below, the
     windows, the frames each shares with the stream before it hatched.  ``segments`` and
-    ``windows``: tasks.long.Segment and Window lists.  Returns the figure."""
+    ``windows``: tasks.long.Segment and Window lists (a text in quotes).  Returns the
+    figure."""
     x = np.asarray(sequence, dtype=np.float64)
     seconds = np.arange(len(x)) / fps
     fig, (top, bottom) = plt.subplots(
@@ -564,7 +565,8 @@ def long_timeline_figure(sequence, segments, windows, fps=30, figsize=(11, 4.6))
     start = 0
     for k, segment in enumerate(segments):
         end = start + segment.frames
-        rest = segment.what in ("neutral", "free")
+        text = getattr(segment, "text", False)
+        rest = not text and segment.what in ("neutral", "free")
         top.axvspan(
             start / fps,
             end / fps,
@@ -575,7 +577,7 @@ def long_timeline_figure(sequence, segments, windows, fps=30, figsize=(11, 4.6))
         top.text(
             (start + end) / 2 / fps,
             1.0,
-            segment.what.replace("_", " "),
+            f'"{segment.what}"' if text else segment.what.replace("_", " "),
             transform=top.get_xaxis_transform(),
             ha="center",
             va="bottom",

@@ -61,6 +61,22 @@ def test_cli_label_task_writes_npz(tmp_path):
         main(["sample", "label", "--label", "grin", "--n", "2", "--steps", "5", "--out", str(out)])
 
 
+def test_cli_long_runs_labels_on_their_data_and_texts_on_the_text_heads(tmp_path, coma_test):
+    neutral = tmp_path / "neutral.npz"
+    np.savez(neutral, neutral=coma_test.neutral_landmarks(int(coma_test.subjects[0])))
+    out, common = tmp_path / "long.npz", ("--neutral", str(neutral), "--n", "1", "--steps", "2")
+    npz, used = sample(out, "long", "--schedule", "mouth_open:1s, neutral:0.5s", *common, "--fps", "15")
+    assert npz["landmarks"].shape == (1, 23, 68, 3) and used["checkpoint"] == "denoiser_coma"
+    assert set(used["checkpoints"]) == {"denoiser_coma", "guide_coma_I", "guide_coma_S"}
+    spec = "mouth_open:1s, 'a broad grin, then neutral':1.5s"
+    npz, used = sample(out, "long", "--schedule", spec, *common)
+    assert npz["landmarks"].shape == (1, 75, 68, 3) and used["schedule"] == spec
+    assert set(used["checkpoints"]) == {"denoiser_coma+bu", "guide_coma+bu_text"}
+    assert used["text_lr"] == pytest.approx(tasks.text_lr(2))
+    assert used["text_guidance_weight"] == config.TEXT_GUIDANCE_WEIGHT
+    assert [s["text"] for s in json.loads(str(npz["schedule"]))] == [False, True]
+
+
 def test_cli_text_task_writes_npz(tmp_path, capsys):
     out = tmp_path / "text.npz"
     npz, used = sample(out, "text", "--text", "disgust high smile", "--n", "2", "--steps", "5")

@@ -20,18 +20,45 @@ def guide():
 
 
 def test_a_schedule_is_read_in_frames_at_the_native_rate():
-    segments = long.parse_schedule("high_smile:3s, neutral:1, 'mouth_open' : 0.5s , free:2s", LABELS)
+    segments = long.parse_schedule("high_smile:3s, neutral:1, mouth_open : 0.5s , free:2s", LABELS)
     assert [(s.what, s.frames) for s in segments] == [
         ("high_smile", 3 * config.NATIVE_FPS), ("neutral", config.NATIVE_FPS),
         ("mouth_open", config.NATIVE_FPS // 2), ("free", 2 * config.NATIVE_FPS)]
+    assert not any(s.text for s in segments)
     assert long.free_schedule(2) == [long.Segment("free", 2 * config.NATIVE_FPS)]
+
+
+def test_a_text_in_quotes_is_a_segment_of_its_own_commas_and_colons_included():
+    spec = """'mouth_open':1s, "a broad grin, then wider: teeth" : 2s ,high_smile:1s,'free':1.5"""
+    segments = long.parse_schedule(spec, LABELS)
+    assert segments == [long.Segment("mouth_open", 30, True), long.Segment("a broad grin, then wider: teeth", 60, True),
+                        long.Segment("high_smile", 30), long.Segment("free", 45, True)]
+    assert long.has_text(spec) and long.has_text(segments) and not long.has_text("high_smile:1s")
+
+
+def test_a_schedule_with_a_text_runs_on_the_text_heads_labels():
+    # coma+bu's 18 labels (a BU emotion among them) with a text; coma's 12 without
+    segments = long.read_schedule('"a broad grin":1s, happy:1s')
+    assert [s.what for s in segments] == ["a broad grin", "happy"]
+    with pytest.raises(ValueError, match="unknown expression 'happy'.*or a description in quotes"):
+        long.read_schedule("happy:1s")
+
+
+def test_a_text_segment_opens_as_written_or_said_in_order_and_a_label_by_its_raw_text():
+    settings = config.Long()
+    window = long.Window("a broad grin", 10, 30, (), True, True)
+    assert long._guiding_text(window, settings) == "a broad grin"
+    assert long._guiding_text(long.Window("high_smile", 10, 30, (), False), settings) == "high smile"
+    assert long._guiding_text(window, config.Long(text_opening="N2E")) == "from the neutral face to a broad grin"
 
 
 @pytest.mark.parametrize("spec, message", [
     ("", "schedule must be a text"), ("high_smile", "cannot read the schedule item"),
     ("high_smile:2s,", "cannot read the schedule item ''"), ("smile:2s", "unknown expression 'smile'.*high_smile"),
     ("high_smile:0.2s", "shorter than a transition"), ("high_smile:1800s, free:1801s", "at most 3600 s"),
-    ("high_smile:-1s", "cannot read"), ("high_smile:2 minutes", "cannot read")])
+    ("high_smile:-1s", "cannot read"), ("high_smile:2 minutes", "cannot read"),
+    ('"":2s', "text is empty"), ('"a grin:2s', "cannot read"), ('"a grin":0.1s', "shorter than a transition"),
+    ('"a grin" 2s', "cannot read"), ("high_smile:1s, 'a grin':2s,", "after the last comma")])
 def test_a_bad_schedule_is_a_clear_error(spec, message):
     with pytest.raises(ValueError, match=message):
         long.parse_schedule(spec, LABELS)
@@ -62,6 +89,32 @@ def test_the_stream_starts_at_the_face_rests_on_it_and_is_deterministic(face, gu
     assert np.array_equal(x[:, 45 + 30 - 1], np.broadcast_to(face, (2, 68, 3)).astype(np.float32))  # the rest's end
     assert np.array_equal(x, long.long_sequence(face, segments, 2, **kwargs))
     assert not np.allclose(x, long.long_sequence(face, segments, 2, seed=1, **kwargs))
+
+
+def test_a_text_schedule_is_guided_by_the_text_head_on_its_data(face, text_head, merged_denoiser):
+    segments = long.read_schedule('"a broad grin":1.5s, neutral:1s, high_smile:1s')
+    kwargs = dict(steps=3, denoiser=merged_denoiser, text_head=text_head, progress=False)
+    x = long.long_sequence(face, segments, 2, **kwargs)
+    assert x.shape == (2, 105, 68, 3) and np.isfinite(x).all()
+    assert np.array_equal(x[:, 0], np.broadcast_to(face, (2, 68, 3)).astype(np.float32))
+    assert np.array_equal(x, long.long_sequence(face, segments, 2, **kwargs))
+    # the texts steer: with a larger rate the text segments change, the rest's anchor does not
+    other = long.long_sequence(face, segments, 2, text_lr=1.0, **kwargs)
+    assert not np.allclose(x[:, :45], other[:, :45])
+    handshake = long.long_sequence(face, segments, 2, join="handshake", **kwargs)
+    assert handshake.shape == x.shape and np.isfinite(handshake).all()
+
+
+def test_labels_and_texts_need_their_own_guides(face, guide, text_head, merged_denoiser, denoiser):
+    texts = long.read_schedule('"a broad grin":1.5s')
+    with pytest.raises(ValueError, match="guided by the text head"):
+        long.long_sequence(face, texts, 1, steps=2, guide=guide, denoiser=merged_denoiser, progress=False)
+    with pytest.raises(ValueError, match="a text head guides a schedule with a text"):
+        long.long_sequence(face, long.free_schedule(1), 1, steps=2, text_head=text_head, denoiser=denoiser,
+                           progress=False)
+    with pytest.raises(ValueError, match="unknown label 'smile' for the text head's data"):
+        long.long_sequence(face, texts + [long.Segment("smile", 30)], 1, steps=2, text_head=text_head,
+                           denoiser=merged_denoiser, progress=False)
 
 
 def test_a_window_continues_the_frames_it_knows(face, guide, denoiser):

@@ -171,6 +171,10 @@ def test_markdown_table_merges_interval_columns_and_keeps_small_settings(tmp_res
     table = results.markdown_table(results.load_result("demo"))
     assert "| method | lr | Acc (%) [95 % interval] | FID [95 % interval] |" in table
     assert "| ours | 0.0003 | 80.00 [75.00, 85.00] | 2.50 [1.00, 4.00] |" in table
+    chosen = results.markdown_table(results.load_result("demo"), columns=["FID", "FID 95 % interval", "method"])
+    assert "| FID [95 % interval] | method |" in chosen and "| 2.50 [1.00, 4.00] | ours |" in chosen
+    with pytest.raises(ValueError, match="demo has no column 'MM'"):
+        results.markdown_table(results.load_result("demo"), columns=["method", "MM"])
 
 
 def test_intervals_overlap_and_rows_as_dicts(tmp_results):

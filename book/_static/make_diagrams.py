@@ -77,7 +77,7 @@ CHAPTERS = {  # id: (title lines, part colour, x, y)
 EDGES = [("01", "03"), ("02", "03"), ("01", "04"), ("03", "05"), ("04", "05"), ("05", "06"), ("03", "07"),
          ("04", "07"), ("05", "08"), ("07", "08"), ("01", "09"), ("08", "10"), ("09", "10"), ("05", "11"),
          ("08", "12"), ("11", "12"), ("06", "a1"), ("09", "13"),
-         ("10", "13"), ("11", "14"), ("08", "15")]
+         ("10", "13"), ("11", "14"), ("08", "15"), ("06", "15")]
 PARTS = [("Foundations", "#f2f2f2", "#777"), ("The diffusion model", "#eef3fb", "#4a6fa5"),
          ("Measuring a generator", "#f5eefa", "#8a5aa8"), ("Conditioning the reverse process", "#fdf3e6", "#c9822b"),
          ("From landmarks to meshes", "#eaf6ec", "#3f8f52"), ("Beyond the paper", "#fbecec", "#b24a4a"),

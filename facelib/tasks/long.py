@@ -14,7 +14,9 @@ frame of every window of a ``neutral`` segment, so the identity is re-anchored a
 rest.  The first window of a label's segment is guided by Alg. 1 with the type-S
 classifier as an N2E sequence (the face sets out from where the stream is, as Alg. 4
 from its neutral face); the segment's other windows continue it unguided, as ``free``
-windows are.
+windows are.  A schedule with a text in quotes runs on the text head's data
+(``settings.text_dataset``): each segment's first window is guided by Alg. 2 with its
+text, a label's by its raw text ("high smile").
 
 The other joins, to compare: "replace" (Alg. 3 as printed, no reconstruction guidance),
 "handshake" (PriorMDM's DoubleTake, its first take: every window at once in one batch,
@@ -31,6 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from .. import data
 from ..config import (
     JOIN_METHODS,
     LONG_MAX_SECONDS,
@@ -41,8 +44,10 @@ from ..config import (
     Long,
     with_overrides,
 )
+from ..descriptions import in_order, raw_text
 from ..guidance import (
     ClassifierScore,
+    CosineScore,
     OptimisationGuidance,
     ReconstructionGuidance,
     chain,
@@ -50,17 +55,21 @@ from ..guidance import (
 from ..inpainting import KnownFrames, keep_known, neutral_faces
 from ..metrics import resample_frames
 from .fill import known_noise
+from ..text import check_text, get_encoder
 from .label import adagrad_lr
-from .loading import check_n, guided_chain, load_guide
+from .loading import check_n, guided_chain, load_guide, load_text_head
+from .text import text_guidance_weight, text_lr
 
 
 @dataclass(frozen=True)
 class Segment:
     """A part of a schedule: ``what`` the face does (a label of the dataset,
-    ``neutral`` or ``free``) for ``frames`` frames at :data:`NATIVE_FPS`."""
+    ``neutral``, ``free`` or, with ``text``, a description) for ``frames`` frames at
+    :data:`NATIVE_FPS`."""
 
     what: str
     frames: int
+    text: bool = False
 
 
 @dataclass(frozen=True)
@@ -74,50 +83,87 @@ class Window:
     keep: int
     anchors: tuple
     opens: bool = False  # the first window of its segment
+    text: bool = False  # ``what`` is a description
 
 
-_ITEM = re.compile(r"^\s*([^:]+?)\s*:\s*([0-9]*\.?[0-9]+)\s*s?\s*$")
+# WHAT:SECONDS, WHAT a word or a text in double or single quotes, then a comma or end
+_ITEM = re.compile(
+    r"""\s*(?:"(?P<double>[^"]*)"|'(?P<single>[^']*)'|(?P<word>[^:,"']+?))"""
+    r"""\s*:\s*(?P<seconds>[0-9]*\.?[0-9]+)\s*s?\s*(?P<comma>,|$)"""
+)
 
 
-def parse_schedule(spec, labels, transition=Long.transition):
-    """The segments of a schedule "label:3s, neutral:1s, ...": each item a label of
-    ``labels``, ``neutral`` (the given face at rest) or ``free`` (unguided motion), and
-    a duration in seconds ("3s", "1.5s" or "3").  A clear error for an empty or
-    malformed schedule, an unknown label, a segment shorter than ``transition`` frames
-    (at :data:`NATIVE_FPS`) and a total over :data:`LONG_MAX_SECONDS`."""
+def _items(spec):
+    """(what, is a text, seconds, the item as written) of each item of a schedule."""
     if not isinstance(spec, str) or not spec.strip():
         raise ValueError(
             "the schedule must be a text like 'high_smile:3s, neutral:1s', got"
             f" {spec!r}"
         )
+    items, position = [], 0
+    while position < len(spec):
+        match = _ITEM.match(spec, position)
+        if match is None or (match.group("comma") and match.end() == len(spec)):
+            rest = spec[position:].split(",")[0].strip() if match is None else ""
+            raise ValueError(
+                f"cannot read the schedule item {rest!r}"
+                + (" (after the last comma)" if match is not None else "")
+                + ": write WHAT:SECONDS, e.g."
+                " 'high_smile:3s' or '\"a broad grin\":2s' (a text in quotes)"
+            )
+        quoted = match.group("double")
+        quoted = match.group("single") if quoted is None else quoted
+        what = match.group("word") if quoted is None else check_text(quoted)
+        written = match.group(0).strip().rstrip(",").strip()
+        items.append((what, quoted is not None, float(match.group("seconds")), written))
+        position = match.end()
+    return items
+
+
+def has_text(spec):
+    """Whether a schedule (a string or a list of :class:`Segment`) holds a text."""
+    if isinstance(spec, str):
+        return any(text for _, text, _, _ in _items(spec))
+    return any(s.text for s in spec)
+
+
+def parse_schedule(spec, labels, transition=Long.transition):
+    """The segments of a schedule "label:3s, neutral:1s, 'a broad grin':2s, ...": each
+    item a label of ``labels``, ``neutral`` (the given face at rest), ``free``
+    (unguided motion) or a description in quotes (text control), and a duration in
+    seconds ("3s", "1.5s" or "3").  A clear error for an empty or malformed schedule,
+    an unknown label, an empty text, a segment shorter than ``transition`` frames (at
+    :data:`NATIVE_FPS`) and a total over :data:`LONG_MAX_SECONDS`."""
     allowed = sorted(labels) + [SCHEDULE_NEUTRAL, SCHEDULE_FREE]
     segments = []
-    for item in spec.split(","):
-        match = _ITEM.match(item)
-        if match is None:
-            raise ValueError(
-                f"cannot read the schedule item {item.strip()!r}: write WHAT:SECONDS,"
-                " e.g. 'high_smile:3s'"
-            )
-        what, seconds = match.group(1).strip("'\" "), float(match.group(2))
-        if what not in allowed:
+    for what, text, seconds, written in _items(spec):
+        if not text and what not in allowed:
             raise ValueError(
                 f"unknown expression {what!r} in the schedule; allowed: "
                 + ", ".join(allowed)
+                + ", or a description in quotes"
             )
         frames = int(round(seconds * NATIVE_FPS))
         if frames < transition:
             raise ValueError(
-                f"the segment {item.strip()!r} lasts {frames} frames, shorter than a"
+                f"the segment {written!r} lasts {frames} frames, shorter than a"
                 f" transition ({transition} frames, {transition / NATIVE_FPS:.2f} s)"
             )
-        segments.append(Segment(what, frames))
+        segments.append(Segment(what, frames, text))
     total = sum(s.frames for s in segments) / NATIVE_FPS
     if total > LONG_MAX_SECONDS:
         raise ValueError(
             f"the schedule lasts {total:g} s; at most {LONG_MAX_SECONDS} s are allowed"
         )
     return segments
+
+
+def read_schedule(spec, settings=Long()):
+    """:func:`parse_schedule` with the labels of the data the schedule runs on:
+    ``settings.dataset``'s, or ``settings.text_dataset``'s when it holds a text."""
+    dataset = settings.text_dataset if has_text(spec) else settings.dataset
+    labels = data.load_dataset(dataset, "train").class_names("I")
+    return parse_schedule(spec, labels, settings.transition)
 
 
 def free_schedule(seconds, transition=Long.transition):
@@ -149,7 +195,14 @@ def plan_windows(segments, num_frames, transition, join="fill"):
                 anchors.add(known + keep - 1)
             opens = left == segment.frames
             windows.append(
-                Window(segment.what, known, keep, tuple(sorted(anchors)), opens)
+                Window(
+                    segment.what,
+                    known,
+                    keep,
+                    tuple(sorted(anchors)),
+                    opens,
+                    segment.text,
+                )
             )
             left -= keep
     return windows
@@ -162,15 +215,24 @@ def join_frames(windows):
     return starts[1:-1]
 
 
-def _label_guidance(window, n, diffusion, guides, settings):
-    """Alg. 1 towards the window's label for n rows (None for ``neutral`` and ``free``):
-    a segment's first window by the type-S classifier as ``settings.opening`` (the face
-    sets out from where the stream is, as an N2E sequence from its neutral face), its
-    other windows (with ``settings.guide_continuation``) by the type-I classifier."""
-    if window.what in (SCHEDULE_NEUTRAL, SCHEDULE_FREE):
+def _segment_guidance(window, n, diffusion, guides, settings):
+    """The guidance of a window's n rows (None for ``neutral`` and ``free``, and for a
+    segment's later windows unless ``settings.guide_continuation``): Alg. 1 for a
+    label, Alg. 2 for a text (:func:`_text_guidance`)."""
+    if window.what in (SCHEDULE_NEUTRAL, SCHEDULE_FREE) and not window.text:
         return None
     if not window.opens and not settings.guide_continuation:
         return None
+    if "text" in guides:
+        return _text_guidance(window, n, diffusion, guides, settings)
+    return _label_guidance(window, n, diffusion, guides, settings)
+
+
+def _label_guidance(window, n, diffusion, guides, settings):
+    """Alg. 1 towards the window's label for n rows: a segment's first window by the
+    type-S classifier as ``settings.opening`` (the face sets out from where the stream
+    is, as an N2E sequence from its neutral face), its other windows by the type-I
+    classifier."""
     if window.opens and settings.opening is not None:
         guide, lr = guides["S"], settings.opening_lr
         label = f"{window.what} {settings.opening}"
@@ -184,6 +246,30 @@ def _label_guidance(window, n, diffusion, guides, settings):
             )
     score = ClassifierScore(guide.model, guide.class_indices([label] * n))
     return OptimisationGuidance(score, diffusion, settings.guidance_weight, lr)
+
+
+def _guiding_text(window, settings):
+    """What Alg. 2 reads for a window: its text (a label's raw text), said in the order
+    ``settings.text_opening`` in a segment's first window (None: as written)."""
+    text = window.what if window.text else raw_text(window.what)
+    if window.opens and settings.text_opening is not None:
+        text = in_order(text, settings.text_opening)
+    return text
+
+
+def _text_guidance(window, n, diffusion, guides, settings):
+    """Alg. 2 (the cosine of Eq. 10 on x_t) towards the window's text for n rows, with
+    text control's lambda and rate unless ``settings`` gives them."""
+    head = guides["text"]
+    embedding = guides["embeddings"][_guiding_text(window, settings)]
+    score = CosineScore(head.model, embedding.expand(n, -1))
+    weight = settings.text_guidance_weight
+    lr = settings.text_lr
+    if lr is None:
+        lr = text_lr(settings.steps, head.meta["training"]["num_diffusion_steps"])
+    return OptimisationGuidance(
+        score, diffusion, text_guidance_weight() if weight is None else weight, lr
+    )
 
 
 def _known(window, n, num_frames, face, tail):
@@ -207,9 +293,48 @@ def _reconstruction(settings, denoiser, diffusion, x0, known):
     )
 
 
-def _models(settings, denoiser, guide, order_guide):
+def _models(settings, denoiser, guide, order_guide, text_head, schedule):
     """The denoiser, its chain and the guides of a long sequence: {"I": labels, "S":
-    labels and their order}."""
+    labels and their order}, or for a schedule with a text {"text": the text head,
+    "embeddings": {text: E(text) (1, D)} of every text it reads}."""
+    if has_text(schedule):
+        if guide is not None or order_guide is not None:
+            raise ValueError(
+                "a schedule with a text is guided by the text head (text_head), not by"
+                " label classifiers (guide, order_guide)"
+            )
+        head = text_head or load_text_head(settings.text_dataset)
+        if head.classifier_type != "text":
+            raise ValueError(
+                "a schedule with a text needs a text head (load_text_head), not a label"
+                " classifier"
+            )
+        bad = [
+            s.what
+            for s in schedule
+            if not s.text
+            and s.what not in (SCHEDULE_NEUTRAL, SCHEDULE_FREE)
+            and s.what not in head.class_names
+        ]
+        if bad:
+            raise ValueError(
+                f"unknown label {bad[0]!r} for the text head's data"
+                f" {head.dataset!r}; allowed: {', '.join(head.class_names)}"
+            )
+        denoiser, diffusion, head = guided_chain(head, denoiser, settings)
+        texts = sorted(
+            {
+                _guiding_text(Window(s.what, 0, 1, (), opens, s.text), settings)
+                for s in schedule
+                if s.text or s.what not in (SCHEDULE_NEUTRAL, SCHEDULE_FREE)
+                for opens in (True, False)
+            }
+        )
+        encoded = torch.as_tensor(get_encoder().encode(texts)).to(denoiser.device)
+        embeddings = {t: e[None] for t, e in zip(texts, encoded)}
+        return denoiser, diffusion, {"text": head, "embeddings": embeddings}
+    if text_head is not None:
+        raise ValueError("a text head guides a schedule with a text; this one has none")
     guides = {
         "I": guide or load_guide(settings.dataset, "I"),
         "S": order_guide or load_guide(settings.dataset, "S"),
@@ -251,6 +376,7 @@ def stream(
     guide=None,
     progress=True,
     order_guide=None,
+    text_head=None,
     **overrides,
 ):
     """Generate n long sequences of the face ``neutral`` (68, 3) in mm (or one face
@@ -258,14 +384,18 @@ def stream(
     ``schedule`` (a list of :class:`Segment`, :func:`parse_schedule`), window by
     window: yields the new frames of each window, (n, k, 68, 3) float32 in mm at
     :data:`NATIVE_FPS`, as soon as they are made.  Joins "fill", "replace" and "concat"
-    (``settings.join``); memory is that of one window."""
+    (``settings.join``); memory is that of one window.  A schedule of labels is guided
+    by ``guide`` (type I) and ``order_guide`` (type S), one with a text by ``text_head``
+    (None: the shipped ones)."""
     settings, face = _check(neutral, schedule, n, settings, overrides)
     if settings.join == "handshake":
         raise ValueError(
             "the handshake generates every window at once: use long_sequence, not"
             " stream"
         )
-    denoiser, diffusion, guides = _models(settings, denoiser, guide, order_guide)
+    denoiser, diffusion, guides = _models(
+        settings, denoiser, guide, order_guide, text_head, schedule
+    )
     num_frames = settings.num_frames
     windows = plan_windows(schedule, num_frames, settings.transition, settings.join)
     generator, noise = torch.Generator().manual_seed(settings.seed), known_noise(
@@ -280,7 +410,7 @@ def stream(
         if settings.join == "fill":
             reconstruction = _reconstruction(settings, denoiser, diffusion, x0, known)
         inner = chain(
-            _label_guidance(window, n, diffusion, guides, settings), reconstruction
+            _segment_guidance(window, n, diffusion, guides, settings), reconstruction
         )
         hook = KnownFrames(
             diffusion, x0, known, noise, inner=inner, feather=settings.feather
@@ -333,9 +463,10 @@ class _Rows:
         return x
 
 
-def _handshake(face, schedule, n, settings, denoiser, guide, order_guide, progress):
-    """DoubleTake's first take: (n, frames, 68, 3) float32 in mm at NATIVE_FPS."""
-    denoiser, diffusion, guides = _models(settings, denoiser, guide, order_guide)
+def _handshake(face, schedule, n, settings, denoiser, guides, progress):
+    """DoubleTake's first take: (n, frames, 68, 3) float32 in mm at NATIVE_FPS;
+    ``guides`` the (guide, order_guide, text_head) given."""
+    denoiser, diffusion, guides = _models(settings, denoiser, *guides, schedule)
     num_frames, o = settings.num_frames, settings.transition
     windows = plan_windows(schedule, num_frames, o)
     # in a batch every window is generated at once: the shared frames are not known,
@@ -350,17 +481,19 @@ def _handshake(face, schedule, n, settings, denoiser, guide, order_guide, progre
     mask = np.stack([m for _, m in made], axis=1).reshape(rows, num_frames)
     x0, known = denoiser.to_model(given), torch.as_tensor(mask).to(denoiser.device)
     hooks = []
-    for what, opens in sorted({(w.what, w.opens) for w in windows}):
-        chosen = torch.tensor([(w.what, w.opens) == (what, opens) for w in windows] * n)
-        label = _label_guidance(
-            Window(what, 0, 1, (), opens),
+    for what, opens, text in sorted({(w.what, w.opens, w.text) for w in windows}):
+        chosen = torch.tensor(
+            [(w.what, w.opens, w.text) == (what, opens, text) for w in windows] * n
+        )
+        guidance = _segment_guidance(
+            Window(what, 0, 1, (), opens, text),
             int(chosen.sum()),
             diffusion,
             guides,
             settings,
         )
-        if label is not None:
-            hooks.append(_Rows(label, chosen))
+        if guidance is not None:
+            hooks.append(_Rows(guidance, chosen))
     reconstruction = _reconstruction(settings, denoiser, diffusion, x0, known)
     anchors = KnownFrames(
         diffusion,
@@ -390,6 +523,7 @@ def long_sequence(
     guide=None,
     progress=True,
     order_guide=None,
+    text_head=None,
     **overrides,
 ):
     """n long sequences (n, frames, 68, 3) float32 in mm at ``settings.fps`` of the face
@@ -398,11 +532,25 @@ def long_sequence(
     settings, face = _check(neutral, schedule, n, settings, overrides)
     if settings.join == "handshake":
         x = _handshake(
-            face, schedule, n, settings, denoiser, guide, order_guide, progress
+            face,
+            schedule,
+            n,
+            settings,
+            denoiser,
+            (guide, order_guide, text_head),
+            progress,
         )
     else:
         made = stream(
-            face, schedule, n, settings, denoiser, guide, progress, order_guide
+            face,
+            schedule,
+            n,
+            settings,
+            denoiser,
+            guide,
+            progress,
+            order_guide,
+            text_head,
         )
         x = np.concatenate(list(made), axis=1)
     return resample_fps(x, settings.fps)
@@ -423,10 +571,12 @@ __all__ = [
     "Segment",
     "Window",
     "free_schedule",
+    "has_text",
     "join_frames",
     "long_sequence",
     "parse_schedule",
     "plan_windows",
+    "read_schedule",
     "resample_fps",
     "stream",
 ]
