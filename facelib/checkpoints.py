@@ -50,7 +50,8 @@ def checkpoint_name(kind, dataset=None, variant=None, seed=0):
     """The one place checkpoints are named (data/checkpoints/world<N>/NAME.pt):
 
     denoiser_<dataset>[_<variant>] (variant "var": lengths 35-45, "cfg":
-    label-conditional, "var_cfg"), guide_<dataset>_<variant> (I, S or text),
+    label-conditional, "var_cfg", "join": reads known frames), guide_<dataset>_<variant>
+    (I, S or text),
     ic_<dataset>_<variant> (I or S), au_regressor_<dataset>, <baseline>_<dataset>
     (actor, motion3dgan, motionclip, lstm_filler), deform_<method>_<split>[_seed<k>]
     (``dataset`` the method, ``variant`` the split; seed 0 unnamed)."""

@@ -49,7 +49,8 @@ FIELD_HELP = {
     "join": (
         "how windows join: fill (the shared frames known, with reconstruction"
         " guidance), replace (Alg. 3 as printed), handshake (DoubleTake: all windows"
-        " at once, shared frames averaged), concat (independent windows)"
+        " at once, shared frames averaged), concat (independent windows), learned"
+        " (fill by a join denoiser, which reads the known frames)"
     ),
     "transition": "frames each window shares with the one before (at the native rate)",
     "fps": "frames per second written",
@@ -739,8 +740,11 @@ def run(args):
     settings, spec = settings_of(args), TASKS[args.task]
     cfg = getattr(settings, "guidance", None) == "cfg"
     dataset = spec.dataset(args, settings) if spec.dataset else settings.dataset
+    variant = "cfg" if cfg else None
+    if getattr(settings, "join", None) == "learned":
+        variant = "join"  # a long sequence's join denoiser
     checkpoint = args.checkpoint or tasks.denoiser_name(
-        dataset, settings.sampler, settings.steps, "cfg" if cfg else None
+        dataset, settings.sampler, settings.steps, variant
     )
     with checkpoints.recording() as used_checkpoints:
         if args.checkpoint is not None or not cfg:

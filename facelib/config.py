@@ -241,9 +241,32 @@ class DenoiserTraining(Optimisation):
     conditional: bool = False
     # conditional only: the label is dropped (-> "no label") this often (MDM: 0.1)
     condition_dropout: float = 0.1
+    # > 0: a join denoiser (DenoiserConfig.known_input; CondMDI, Cohan et al. 2024):
+    # this often a training sequence's first 1..F/2 frames (and half the time its last)
+    # are given as input, as a long sequence's window knows them (0: never; no input)
+    known_frames: float = 0.0
+    # fine-tune: start from this denoiser checkpoint's weights (None: from scratch)
+    start_from: str | None = None
 
     def __post_init__(self):
         super().__post_init__()
+        if not 0 <= self.known_frames <= 1:
+            raise ValueError(
+                f"known_frames is a probability in [0, 1], got {self.known_frames}"
+            )
+        if self.known_frames and not isinstance(self.num_frames, int):
+            raise ValueError(
+                "known_frames gives a sequence's first and last frames: train on one"
+                " length (num_frames an int), not on lengths"
+                f" {self.num_frames}"
+            )
+        if self.start_from is not None and not (
+            isinstance(self.start_from, str) and self.start_from.startswith("denoiser")
+        ):
+            raise ValueError(
+                "start_from names a denoiser checkpoint (denoiser_<dataset>...), got"
+                f" {self.start_from!r}"
+            )
         if not 0 <= self.anatomy_swap <= 1:
             raise ValueError(
                 f"anatomy_swap is a probability in [0, 1], got {self.anatomy_swap}"
@@ -1037,7 +1060,7 @@ ANIMATE_MAX_SECONDS = 60
 # "handshake" (PriorMDM's DoubleTake, first take: all windows at once, their shared
 # frames averaged at every step), "concat" (independent windows end to end: the naive
 # baseline)
-JOIN_METHODS = ("fill", "replace", "handshake", "concat")
+JOIN_METHODS = ("fill", "replace", "handshake", "concat", "learned")
 # the words of a schedule that are not labels: the given face at rest; free motion
 SCHEDULE_NEUTRAL, SCHEDULE_FREE = "neutral", "free"
 

@@ -179,6 +179,36 @@ def fill_masks(setting, n, num_frames=40, seed=0):
     return check_known_mask(mask, num_frames)
 
 
+class KnownInput(torch.nn.Module):
+    """A join denoiser (DenoiserConfig.known_input) with its known frames bound: x0 (B,
+    F, 68, 3) in the model's space, ``known`` (B, F) bool.  A model like the denoiser,
+    eps_theta(x_t, t | x_0 m, m), so that every sampler and hook runs it (the chapter
+    "Any length"; CondMDI, Cohan et al. 2024)."""
+
+    def __init__(self, denoiser, x0, known):
+        super().__init__()
+        if not getattr(denoiser.config, "known_input", False):
+            raise ValueError(
+                "this denoiser does not read known frames: use a join denoiser"
+                " (denoiser_<dataset>_join, config.DenoiserTraining.known_frames)"
+            )
+        known = torch.as_tensor(known)
+        if known.dtype != torch.bool or tuple(known.shape) != tuple(x0.shape[:2]):
+            raise ValueError(
+                f"known must be a (B, F) bool mask of frames, {tuple(x0.shape[:2])},"
+                f" got {known.dtype} {tuple(known.shape)}"
+            )
+        self.denoiser, self.config = denoiser, denoiser.config
+        self.register_buffer("x0", torch.as_tensor(x0), persistent=False)
+        self.register_buffer("known", known, persistent=False)
+
+    def forward(self, xt, t, mask=None):
+        return self.denoiser(xt, t, mask, known=(self.x0, self.known))
+
+    def eps_and_x0(self, xt, t, mask=None):
+        return self.denoiser.eps_and_x0(xt, t, mask, known=(self.x0, self.known))
+
+
 @dataclass
 class KnownFrames:
     """Sampler hook of Alg. 3 (lines 10-12): keep x_hat on the unknown frames, re-draw

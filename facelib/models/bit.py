@@ -79,16 +79,19 @@ class BiT(nn.Module):
         self.encoder = nn.TransformerEncoder(layer, depth, enable_nested_tensor=False)
         self.norm = nn.LayerNorm(width)
 
-    def encode(self, xt, t, mask=None, prefix=None):
+    def encode(self, xt, t, mask=None, prefix=None, added=None):
         """Output tokens (B, P + F, width) of x_t (B, F, L, 3) at steps t (B,);
         ``prefix`` (P, width) or (B, P, width) are extra tokens put before the frames
         (they also receive TE(t)); ``mask`` (B, F) bool marks the valid frames (prefix
-        tokens are always valid)."""
+        tokens are always valid); ``added`` (B, F, width) is added to the frames'
+        tokens (the known frames' embedding of a join denoiser)."""
         b, f = xt.shape[:2]
         t = t.to(xt.device)
         frames = torch.arange(1, f + 1, device=xt.device)
         h = self.fe(xt.reshape(b, f, -1))
         h = h + sinusoidal_embedding(frames, self.width, dtype=h.dtype)[None]
+        if added is not None:
+            h = h + added
         if prefix is not None:
             prefix = prefix if prefix.ndim == 3 else prefix[None].expand(b, -1, -1)
             h = torch.cat([prefix, h], dim=1)

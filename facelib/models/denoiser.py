@@ -28,6 +28,12 @@ target, and :meth:`Denoiser.forward` always returns the noise estimate it implie
 (x_t + sqrt(abar_t) u) / (sqrt(abar_t) + sqrt(1 - abar_t))), so every sampler and
 guidance of the book runs any of them unchanged.
 
+A join denoiser (``known_input``, not in the paper; Cohan et al. 2024's CondMDI, the
+chapter "Any length") also reads the frames a task knows: KE([x_0 m, m]), a linear
+embedding of the known frames' values and the mask m (B, F), is added to their tokens.
+It starts at zero, so a join denoiser fine-tuned from an unconditional one starts as
+that one, and is trained with random known frames (config.DenoiserTraining.known_frames).
+
 The schedule "flow" is rectified flow's path (diffusion.flow_alphas_bar): its time
 labels are continuous, t = tau T with tau in [0, 1], and abar is computed, not looked
 up.
@@ -63,6 +69,8 @@ class DenoiserConfig:
     prediction: str = "eps"
     # > 0: label-conditional (classifier-free guidance), a label token before the frames
     num_classes: int = 0
+    # True: a join denoiser, which also reads the known frames (see the module docstring)
+    known_input: bool = False
 
 
 class Denoiser(BiT):
@@ -92,6 +100,11 @@ class Denoiser(BiT):
         # the label's token; index num_classes is "no label" (the unconditional model)
         if c.num_classes:
             self.label_embedding = nn.Embedding(c.num_classes + 1, c.width)
+        # KE: the known frames' values and mask, zero at first
+        if c.known_input:
+            self.known_embedding = nn.Linear(features + 1, c.width)
+            nn.init.zeros_(self.known_embedding.weight)
+            nn.init.zeros_(self.known_embedding.bias)
 
     @torch.no_grad()
     def fit_prior(self, frames):
@@ -160,36 +173,38 @@ class Denoiser(BiT):
         y = y / (abar * self.prior_variances + 1 - abar)
         return (y @ self.prior_basis.T).reshape(xt.shape)
 
-    def forward(self, xt, t, mask=None, labels=None):
+    def forward(self, xt, t, mask=None, labels=None, known=None):
         """Noise estimate for x_t at steps t; ``mask`` (B, F) bool marks the valid
         frames.  A label-conditional denoiser (``num_classes`` > 0) reads ``labels``
         (B,) class indices, ``num_classes`` meaning "no label" (None: no label for any);
-        an unconditional one takes none."""
-        return self.to_eps(xt, t, self.output(xt, t, mask, labels))
+        an unconditional one takes none.  A join denoiser (``known_input``) reads
+        ``known`` = (x_0 (B, F, 68, 3), m (B, F) bool), the values of the frames m
+        marks (None: none known); any other takes none."""
+        return self.to_eps(xt, t, self.output(xt, t, mask, labels, known))
 
-    def velocity(self, xt, t, mask=None, labels=None):
+    def velocity(self, xt, t, mask=None, labels=None, known=None):
         """Rectified flow's velocity estimate u = eps - x_0 for x_t at steps t (the
         network's own output when it predicts u; otherwise from its noise estimate,
         which needs abar_t > 0)."""
-        output = self.output(xt, t, mask, labels)
+        output = self.output(xt, t, mask, labels, known)
         if self.config.prediction == "u":
             return output
         eps = self.to_eps(xt, t, output)
         abar = self._abar(t, xt)
         return eps - (xt - (1 - abar).sqrt() * eps) / abar.sqrt()
 
-    def x0(self, xt, t, mask=None, labels=None):
+    def x0(self, xt, t, mask=None, labels=None, known=None):
         """The clean-sequence estimate x0_hat(x_t, t), computed in the target's own form
         (x_0, sqrt(abar) x_t - sqrt(1 - abar) v, or from u), so that it stays exact
         where abar_t is small and eps would be divided by sqrt(abar_t)."""
-        return self.x0_from(xt, t, self.output(xt, t, mask, labels))
+        return self.x0_from(xt, t, self.output(xt, t, mask, labels, known))
 
-    def eps_and_x0(self, xt, t, mask=None, labels=None):
+    def eps_and_x0(self, xt, t, mask=None, labels=None, known=None):
         """(eps_hat, x0_hat) from one pass of the network: x0_hat in the target's own
         form (:meth:`x0`), or None for an eps network, whose x0_hat the sampler computes
         from eps (Eq. 6 inverted; the rectified flow's needs its own at t = T, where its
         eps is x_t itself)."""
-        output = self.output(xt, t, mask, labels)
+        output = self.output(xt, t, mask, labels, known)
         eps = self.to_eps(xt, t, output)
         if self.config.prediction == "eps":
             return eps, None
@@ -206,10 +221,11 @@ class Denoiser(BiT):
             return (xt - (1 - abar).sqrt() * output) / (abar.sqrt() + (1 - abar).sqrt())
         return (xt - (1 - abar).sqrt() * output) / abar.sqrt()
 
-    def output(self, xt, t, mask=None, labels=None):
+    def output(self, xt, t, mask=None, labels=None, known=None):
         """The network's estimate of its target (``config.prediction``), the Gaussian
         estimate included; arguments as :meth:`forward`'s."""
         check_sequence_input(xt, t, mask, self.config.num_landmarks)
+        added = self._known_tokens(xt, known)
         k = self.config.num_classes
         if not k:
             if labels is not None:
@@ -217,7 +233,7 @@ class Denoiser(BiT):
                     "this denoiser is unconditional (num_classes = 0): "
                     "it takes no labels"
                 )
-            tokens = self.encode(xt, t, mask)
+            tokens = self.encode(xt, t, mask, added=added)
         else:
             if labels is None:
                 labels = torch.full((len(xt),), k, device=xt.device)
@@ -231,7 +247,11 @@ class Denoiser(BiT):
                         f"({k}: no label)"
                     )
             tokens = self.encode(
-                xt, t, mask, prefix=self.label_embedding(labels.to(xt.device))[:, None]
+                xt,
+                t,
+                mask,
+                prefix=self.label_embedding(labels.to(xt.device))[:, None],
+                added=added,
             )[:, 1:]
         # the network's estimate of its target (config.prediction)
         output = self.out(tokens).reshape(xt.shape)
@@ -242,6 +262,32 @@ class Denoiser(BiT):
                 xt, t, self.gaussian_eps(xt, t.to(xt.device))
             )
         return output
+
+    def _known_tokens(self, xt, known):
+        """KE([x_0 m, m]) (B, F, width) of ``known`` = (x_0, m) (None: nothing known;
+        a denoiser without ``known_input`` takes None only)."""
+        if not self.config.known_input:
+            if known is not None:
+                raise ValueError(
+                    "this denoiser does not read known frames (known_input = False):"
+                    " give known=None, or use a join denoiser"
+                )
+            return None
+        b, f = xt.shape[:2]
+        if known is None:
+            values = xt.new_zeros(b, f, xt.shape[2] * 3)
+            m = xt.new_zeros(b, f, 1)
+        else:
+            x0, m = known
+            if tuple(x0.shape) != tuple(xt.shape) or tuple(m.shape) != (b, f):
+                raise ValueError(
+                    f"known = (x_0, m) must be shaped {tuple(xt.shape)} and {(b, f)},"
+                    f" got {tuple(x0.shape)} and {tuple(m.shape)}"
+                )
+            m = m.to(xt.device, torch.bool)[..., None]
+            values = torch.where(m, x0.to(xt.device, xt.dtype).reshape(b, f, -1), 0.0)
+            m = m.to(xt.dtype)
+        return self.known_embedding(torch.cat([values, m], dim=-1))
 
     def config_dict(self):
         return asdict(self.config)

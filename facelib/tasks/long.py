@@ -18,6 +18,10 @@ windows are.  A schedule with a text in quotes runs on the text head's data
 (``settings.text_dataset``): each segment's first window is guided by Alg. 2 with its
 text, a label's by its raw text ("high smile").
 
+Join "learned" (not in the paper; CondMDI, Cohan et al. 2024) is fill run by a join
+denoiser, which also reads the known frames as input (inpainting.KnownInput), trained
+to continue them (denoiser_<dataset>_join).
+
 The other joins, to compare: "replace" (Alg. 3 as printed, no reconstruction guidance),
 "handshake" (PriorMDM's DoubleTake, its first take: every window at once in one batch,
 the frames two windows share replaced by their mean after every step; memory grows with
@@ -52,12 +56,20 @@ from ..guidance import (
     ReconstructionGuidance,
     chain,
 )
-from ..inpainting import KnownFrames, keep_known, neutral_faces
+from ..checkpoints import checkpoint_name
+from ..inpainting import KnownFrames, KnownInput, keep_known, neutral_faces
 from ..metrics import resample_frames
 from .fill import known_noise
 from ..text import check_text, get_encoder
 from .label import adagrad_lr
-from .loading import check_n, guided_chain, load_guide, load_text_head
+from .loading import (
+    check_n,
+    denoiser_name,
+    guided_chain,
+    load_denoiser,
+    load_guide,
+    load_text_head,
+)
 from .text import text_guidance_weight, text_lr
 
 
@@ -284,13 +296,31 @@ def _known(window, n, num_frames, face, tail):
     return given, mask
 
 
-def _reconstruction(settings, denoiser, diffusion, x0, known):
+def _reconstruction(settings, model, diffusion, x0, known):
     """Reconstruction guidance towards the known frames (None at scale 0)."""
     if not settings.reconstruction_scale:
         return None
     return ReconstructionGuidance(
-        denoiser.model, diffusion, x0, known, settings.reconstruction_scale
+        model, diffusion, x0, known, settings.reconstruction_scale
     )
+
+
+def _join_denoiser(settings, denoiser, schedule):
+    """The denoiser of join "learned": the given one, which must read known frames, or
+    the shipped denoiser_<dataset>_join (None for the other joins: the default)."""
+    if settings.join != "learned":
+        return denoiser
+    if denoiser is None:
+        dataset = settings.text_dataset if has_text(schedule) else settings.dataset
+        denoiser = load_denoiser(
+            denoiser_name(dataset, settings.sampler, settings.steps, "join")
+        )
+    if not getattr(denoiser.model.config, "known_input", False):
+        raise ValueError(
+            "join 'learned' needs a join denoiser, which reads the known frames"
+            f" (denoiser_{settings.dataset}_join); this one does not"
+        )
+    return denoiser
 
 
 def _models(settings, denoiser, guide, order_guide, text_head, schedule):
@@ -383,8 +413,8 @@ def stream(
     per sequence, (n, 68, 3)), following
     ``schedule`` (a list of :class:`Segment`, :func:`parse_schedule`), window by
     window: yields the new frames of each window, (n, k, 68, 3) float32 in mm at
-    :data:`NATIVE_FPS`, as soon as they are made.  Joins "fill", "replace" and "concat"
-    (``settings.join``); memory is that of one window.  A schedule of labels is guided
+    :data:`NATIVE_FPS`, as soon as they are made.  Joins "fill", "replace", "concat"
+    and "learned" (``settings.join``); memory is that of one window.  A schedule of labels is guided
     by ``guide`` (type I) and ``order_guide`` (type S), one with a text by ``text_head``
     (None: the shipped ones)."""
     settings, face = _check(neutral, schedule, n, settings, overrides)
@@ -393,6 +423,7 @@ def stream(
             "the handshake generates every window at once: use long_sequence, not"
             " stream"
         )
+    denoiser = _join_denoiser(settings, denoiser, schedule)
     denoiser, diffusion, guides = _models(
         settings, denoiser, guide, order_guide, text_head, schedule
     )
@@ -406,16 +437,19 @@ def stream(
         given, mask = _known(window, n, num_frames, face, tail)
         x0 = denoiser.to_model(given)
         known = torch.as_tensor(mask).to(denoiser.device)
+        model = denoiser.model
+        if settings.join == "learned":
+            model = KnownInput(model, x0, known)
         reconstruction = None
-        if settings.join == "fill":
-            reconstruction = _reconstruction(settings, denoiser, diffusion, x0, known)
+        if settings.join in ("fill", "learned"):
+            reconstruction = _reconstruction(settings, model, diffusion, x0, known)
         inner = chain(
             _segment_guidance(window, n, diffusion, guides, settings), reconstruction
         )
         hook = KnownFrames(
             diffusion, x0, known, noise, inner=inner, feather=settings.feather
         )
-        x = hook.sample(denoiser.model, generator, progress=progress)
+        x = hook.sample(model, generator, progress=progress)
         out = keep_known(denoiser.to_mm(x.detach()), given, mask)
         new = out[:, window.known : window.known + window.keep]
         previous = new if tail is None else np.concatenate([tail, new], axis=1)
@@ -494,7 +528,7 @@ def _handshake(face, schedule, n, settings, denoiser, guides, progress):
         )
         if guidance is not None:
             hooks.append(_Rows(guidance, chosen))
-    reconstruction = _reconstruction(settings, denoiser, diffusion, x0, known)
+    reconstruction = _reconstruction(settings, denoiser.model, diffusion, x0, known)
     anchors = KnownFrames(
         diffusion,
         x0,

@@ -146,6 +146,7 @@ class DenoiserRecipe(Recipe):
             schedule=settings.schedule,
             prediction=settings.prediction,
             num_classes=len(train.label_names) * settings.conditional,
+            known_input=settings.known_frames > 0,
         )
         a = self.architecture
         if (a.num_diffusion_steps, a.schedule, a.prediction) != (
@@ -265,7 +266,27 @@ class DenoiserRecipe(Recipe):
                 ]
             )
         )
+        if self.settings.start_from is not None:
+            self._start_from(model, self.settings.start_from)
         return model
+
+    def _start_from(self, model, name):
+        """Fine-tuning: the weights (and Gaussian prior) of checkpoint ``name``, whose
+        network must be this one's but for what this one adds (the known frames'
+        embedding, which starts at zero)."""
+        start = load_denoiser(name).model
+        ours, theirs = asdict(model.config), asdict(start.config)
+        differ = [k for k in ours if k != "known_input" and ours[k] != theirs.get(k)]
+        if differ or (theirs.get("known_input") and not ours["known_input"]):
+            raise ValueError(
+                f"cannot start from {name}: its network differs from this one's in"
+                f" {differ or ['known_input']}"
+            )
+        missing, unexpected = model.load_state_dict(start.state_dict(), strict=False)
+        if unexpected or any(not k.startswith("known_embedding.") for k in missing):
+            raise ValueError(
+                f"cannot start from {name}: missing {missing}, unexpected {unexpected}"
+            )
 
     def clean_batch(self, draws):
         """A batch of training sequences as the denoiser sees them: (indices, x_0),
@@ -289,6 +310,8 @@ class DenoiserRecipe(Recipe):
                 "min_snr_gamma": self.settings.min_snr_gamma,
             }
         inputs = {}
+        if self.architecture.known_input:
+            inputs["known"] = (x0, self.known_mask(draws, x0.shape[1]))
         # classifier-free guidance: drop the label now and then
         if self.architecture.num_classes:
             dropped = draws.rand() < self.settings.condition_dropout
@@ -304,6 +327,17 @@ class DenoiserRecipe(Recipe):
             **inputs,
         )
         return loss, {"loss": loss.item()}
+
+    def known_mask(self, draws, num_frames):
+        """The known frames (B, F) of a join denoiser's training batch: with probability
+        ``known_frames`` the first k ~ U{1..F/2} frames (the transition a window of a
+        long sequence knows, config.Long), and half the time the last frame too (the
+        rest's anchor); else none."""
+        frames = torch.arange(num_frames, device=self.device)[None]
+        given = draws.rand() < self.settings.known_frames
+        first = frames < draws.randint(1, num_frames // 2 + 1)[:, None]
+        last = (draws.rand() < 0.5)[:, None] & (frames == num_frames - 1)
+        return (first | last) & given[:, None]
 
     def metadata(self, model):
         training = asdict(self.settings) | {"model": asdict(model.config)}
@@ -326,7 +360,11 @@ class DenoiserRecipe(Recipe):
     def checkpoint_name(self):
         variant = "_".join(
             v
-            for v, on in (("var", self.variable), ("cfg", self.settings.conditional))
+            for v, on in (
+                ("var", self.variable),
+                ("cfg", self.settings.conditional),
+                ("join", self.settings.known_frames > 0),
+            )
             if on
         )
         return checkpoint_name("denoiser", self.settings.dataset, variant or None)

@@ -57,6 +57,18 @@ SHIPPED = {
     # Issue 46: the rectified flow on the same network, data, steps and batch as
     # denoiser_coma (sampler "flow")
     "denoiser_coma_flow": ("denoiser", {"schedule": "flow", "prediction": "u"}),
+    # Issue 47: the join denoiser of long sequences (join "learned"), fine-tuned from
+    # denoiser_coma with known first frames as input (CondMDI, Cohan et al. 2024)
+    "denoiser_coma_join": (
+        "denoiser",
+        {
+            "known_frames": 0.75,
+            "start_from": "denoiser_coma",
+            "steps": 4000,
+            "lr": 2e-4,
+            "warmup": 100,
+        },
+    ),
     # Issue 46: progressive distillation of denoiser_coma's DDIM chain, 256 -> 128 ->
     # ... -> 1 steps, each round's student the next round's teacher (sampler "student")
     **{
