@@ -22,6 +22,8 @@ frames made per second (one thread).
 most of the schedule's joins fall where a segment begins, and the face moves
 differently there with or without a join; a free stream's joins are only joins.
 --feather: rows of fill with feathered replacement (config.Long.feather).
+--learned-alone: a row of join "learned" (the join denoiser) without reconstruction
+guidance.
 
 --stream text: a schedule of texts in quotes on the text head's data (coma+bu, 18
 labels, its held-out faces): each label's raw text ("high smile"), "TEXT:2s,
@@ -196,6 +198,10 @@ def joins_experiment(args):
         runs.append(("fill, segments open with type I", dict(opening=None)))
     runs += [(f"fill, feather {f:g}", dict(feather=f)) for f in args.feather]
     runs += [(f"fill, text lr {r:g}", dict(text_lr=r)) for r in args.text_lr]
+    if args.learned_alone:  # the join denoiser without reconstruction guidance
+        runs.append(
+            ("learned, no reconstruction guidance", dict(reconstruction_scale=0))
+        )
     for name, changed in runs:
         join = name.split(",")[0]
         t0 = time.perf_counter()
@@ -247,6 +253,8 @@ def joins_experiment(args):
         else [f"denoiser_{dataset}", f"guide_{dataset}_I", f"guide_{dataset}_S"]
         + [f"ic_{dataset}_I"]
     )
+    if "learned" in args.joins or args.learned_alone:
+        checkpoints.append(f"denoiser_{dataset}_join")
     return rows, checkpoints, settings, len(faces)
 
 
@@ -344,6 +352,11 @@ def main():
         nargs="*",
         default=[],
         help="joins: also rows of fill with these feathers (frames; config.Long)",
+    )
+    p.add_argument(
+        "--learned-alone",
+        action="store_true",
+        help="joins: also a row of the join denoiser without reconstruction guidance",
     )
     p.add_argument(
         "--text-lr",

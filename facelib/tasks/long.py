@@ -56,11 +56,10 @@ from ..guidance import (
     ReconstructionGuidance,
     chain,
 )
-from ..checkpoints import checkpoint_name
 from ..inpainting import KnownFrames, KnownInput, keep_known, neutral_faces
 from ..metrics import resample_frames
-from .fill import known_noise
 from ..text import check_text, get_encoder
+from .fill import known_noise
 from .label import adagrad_lr
 from .loading import (
     check_n,
