@@ -44,8 +44,10 @@ end (the anchor, 0 by construction).
 
 --save NAME stores the table in results/NAME.json:
 
-    python benchmarks/long_sequences.py --type-i-opening --feather 4 --save long_sequences
-    python benchmarks/long_sequences.py --stream free --feather 4 --save long_sequences_free
+    python benchmarks/long_sequences.py --type-i-opening --feather 4 --learned-alone \
+        --save long_sequences
+    python benchmarks/long_sequences.py --stream free --feather 4 --learned-alone \
+        --save long_sequences_free
     python benchmarks/long_sequences.py --stream text --type-i-opening --save long_sequences_text
     python benchmarks/long_sequences.py --experiment length --save long_sequences_length
 """

@@ -32,7 +32,8 @@ A join denoiser (``known_input``, not in the paper; Cohan et al. 2024's CondMDI,
 chapter "Any length") also reads the frames a task knows: KE([x_0 m, m]), a linear
 embedding of the known frames' values and the mask m (B, F), is added to their tokens.
 It starts at zero, so a join denoiser fine-tuned from an unconditional one starts as
-that one, and is trained with random known frames (config.DenoiserTraining.known_frames).
+that one, and is trained with random known frames
+(config.DenoiserTraining.known_frames).
 
 The schedule "flow" is rectified flow's path (diffusion.flow_alphas_bar): its time
 labels are continuous, t = tau T with tau in [0, 1], and abar is computed, not looked
@@ -69,7 +70,7 @@ class DenoiserConfig:
     prediction: str = "eps"
     # > 0: label-conditional (classifier-free guidance), a label token before the frames
     num_classes: int = 0
-    # True: a join denoiser, which also reads the known frames (see the module docstring)
+    # True: a join denoiser, which also reads the known frames (the module docstring)
     known_input: bool = False
 
 

@@ -409,13 +409,13 @@ def stream(
     **overrides,
 ):
     """Generate n long sequences of the face ``neutral`` (68, 3) in mm (or one face
-    per sequence, (n, 68, 3)), following
-    ``schedule`` (a list of :class:`Segment`, :func:`parse_schedule`), window by
-    window: yields the new frames of each window, (n, k, 68, 3) float32 in mm at
-    :data:`NATIVE_FPS`, as soon as they are made.  Joins "fill", "replace", "concat"
-    and "learned" (``settings.join``); memory is that of one window.  A schedule of labels is guided
-    by ``guide`` (type I) and ``order_guide`` (type S), one with a text by ``text_head``
-    (None: the shipped ones)."""
+    per sequence, (n, 68, 3)), following ``schedule`` (a list of :class:`Segment`,
+    :func:`parse_schedule`), window by window: yields the new frames of each window,
+    (n, k, 68, 3) float32 in mm at :data:`NATIVE_FPS`, as soon as they are made.
+    Joins "fill", "replace", "concat" and "learned" (``settings.join``); memory is that
+    of one window.  A schedule of labels is guided by ``guide`` (type I) and
+    ``order_guide`` (type S), one with a text by ``text_head`` (None: the shipped
+    ones)."""
     settings, face = _check(neutral, schedule, n, settings, overrides)
     if settings.join == "handshake":
         raise ValueError(
