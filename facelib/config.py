@@ -1199,6 +1199,12 @@ class GeometryAdaptive(Sampling):
 
 # millimetres per unit of a reader's mesh (the chapter "Your own face")
 UNITS_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0}
+# a mesh of the template's triangles in mm is animated as it is (no registration) when
+# the rigid fit onto the template turns it by at most this many degrees and moves its
+# centre by at most this many mm: twice the most the world's own identities need (0.78
+# degrees, 4.4 mm over identity seeds 0-39, as `python -m facelib neutral` writes them)
+CANONICAL_POSE_DEGREES = 1.5
+CANONICAL_POSE_SHIFT_MM = 9.0
 
 
 @dataclass(frozen=True)

@@ -109,10 +109,17 @@ class Animation:
     seconds: dict
 
 
-def is_canonical_template(mesh, tolerance_mm=1.0):
+def is_canonical_template(
+    mesh,
+    max_degrees=config.CANONICAL_POSE_DEGREES,
+    max_shift_mm=config.CANONICAL_POSE_SHIFT_MM,
+):
     """True when ``mesh`` (a registration.UserMesh) has the template's triangles and
-    lies in the canonical pose in mm (as `python -m facelib neutral` writes it): it is
-    animated as it is, with no registration.
+    lies in the canonical pose in mm (as `python -m facelib neutral` writes it): the
+    rigid fit onto the template turns it by at most ``max_degrees`` and moves its
+    centre by at most ``max_shift_mm`` (another identity's shape moves the fit too,
+    so the vertices themselves are not compared).  It is animated as it is, with no
+    registration.
     """
     t = tpl.get_template()
     if (
@@ -122,10 +129,10 @@ def is_canonical_template(mesh, tolerance_mm=1.0):
     ):
         return False
     _, r, shift = registration.similarity(mesh.vertices, t.vertices, scale=False)
-    return bool(
-        np.linalg.norm(mesh.vertices @ r.T + shift - mesh.vertices, axis=1).max()
-        < tolerance_mm
-    )
+    degrees = np.degrees(np.arccos(np.clip((np.trace(r) - 1) / 2, -1.0, 1.0)))
+    centre = mesh.vertices.mean(0)
+    moved = np.linalg.norm(centre @ r.T + shift - centre)
+    return bool(degrees <= max_degrees and moved <= max_shift_mm)
 
 
 def animate_mesh(

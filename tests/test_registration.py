@@ -194,3 +194,19 @@ def test_generated_bad_meshes_get_a_clear_error(case, units):
         reg.check_mesh(vertices, faces, units)
     text = str(e.value)
     assert message in text or (units is not None and "contradicts its size" in text), text
+
+
+def test_a_template_mesh_of_any_identity_in_the_canonical_pose_is_animated_without_registration():
+    # `python -m facelib neutral` writes other identities whose rigid fit onto the template moves them by up to
+    # 4.4 mm: they are in the canonical pose all the same; a turned or moved copy is not
+    from facelib import pipeline
+    from facelib.face import Face, sample_identity
+    faces = get_template().faces
+    for seed in (0, 3, 7):
+        assert pipeline.is_canonical_template(reg.UserMesh(Face(sample_identity(seed)).neutral, faces, "mm"))
+    v = Face(sample_identity(3)).neutral
+    c, a = v.mean(0), np.radians(5)
+    turn = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
+    assert not pipeline.is_canonical_template(reg.UserMesh((v - c) @ turn.T + c, faces, "mm"))
+    assert not pipeline.is_canonical_template(reg.UserMesh(v + [20.0, 0, 0], faces, "mm"))
+    assert not pipeline.is_canonical_template(reg.UserMesh(v / 10, faces, "cm"))
