@@ -64,9 +64,9 @@ SHIPPED = {
         {
             "known_frames": 0.75,
             "start_from": "denoiser_coma",
-            "steps": 4000,
-            "lr": 2e-4,
-            "warmup": 100,
+            "steps": 12_000,
+            "lr": 5e-4,
+            "warmup": 200,
         },
     ),
     # Issue 46: progressive distillation of denoiser_coma's DDIM chain, 256 -> 128 ->
