@@ -48,7 +48,8 @@ end (the anchor, 0 by construction).
         --save long_sequences
     python benchmarks/long_sequences.py --stream free --feather 4 --learned-alone \
         --save long_sequences_free
-    python benchmarks/long_sequences.py --stream text --type-i-opening --save long_sequences_text
+    python benchmarks/long_sequences.py --stream text --type-i-opening --text-lr 0.2 0.4 \
+        --save long_sequences_text
     python benchmarks/long_sequences.py --experiment length --save long_sequences_length
 """
 
@@ -377,6 +378,14 @@ def main():
         p.error("--feather, --type-i-opening and --stream are options of the joins")
     if args.text_lr and args.stream != "text":
         p.error("--text-lr is an option of --stream text")
+    if args.stream == "text" and (
+        args.learned_alone or "learned" in (args.joins or ())
+    ):
+        p.error("no join denoiser is shipped for the text head's data (coma+bu)")
+    if args.experiment == "length" and (
+        args.text_lr or args.learned_alone or args.joins
+    ):
+        p.error("--text-lr, --learned-alone and --joins are options of the joins")
     if args.stream == "free" and args.type_i_opening:
         p.error("a free stream has no segment to open: drop --type-i-opening")
     if args.joins is None:

@@ -740,12 +740,13 @@ def run(args):
     settings, spec = settings_of(args), TASKS[args.task]
     cfg = getattr(settings, "guidance", None) == "cfg"
     dataset = spec.dataset(args, settings) if spec.dataset else settings.dataset
-    variant = "cfg" if cfg else None
-    if getattr(settings, "join", None) == "learned":
-        variant = "join"  # a long sequence's join denoiser
     checkpoint = args.checkpoint or tasks.denoiser_name(
-        dataset, settings.sampler, settings.steps, variant
+        dataset, settings.sampler, settings.steps, "cfg" if cfg else None
     )
+    if args.task == "long" and settings.join == "learned" and not args.checkpoint:
+        checkpoint = tasks.long.join_denoiser_name(
+            settings, [] if args.schedule is None else args.schedule
+        )
     with checkpoints.recording() as used_checkpoints:
         if args.checkpoint is not None or not cfg:
             denoiser = tasks.load_denoiser(checkpoint)

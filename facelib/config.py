@@ -1059,7 +1059,7 @@ ANIMATE_MAX_SECONDS = 60
 # Alg. 3 with the book's reconstruction guidance), "replace" (Alg. 3 as printed),
 # "handshake" (PriorMDM's DoubleTake, first take: all windows at once, their shared
 # frames averaged at every step), "concat" (independent windows end to end: the naive
-# baseline)
+# baseline), "learned" (fill by a join denoiser, which reads the known frames)
 JOIN_METHODS = ("fill", "replace", "handshake", "concat", "learned")
 # the words of a schedule that are not labels: the given face at rest; free motion
 SCHEDULE_NEUTRAL, SCHEDULE_FREE = "neutral", "free"
@@ -1068,8 +1068,9 @@ SCHEDULE_NEUTRAL, SCHEDULE_FREE = "neutral", "free"
 @dataclass(frozen=True)
 class Long(Sampling):
     """Sequences of any length (not in the paper): windows of the model's length, each
-    overlapping the one before by ``transition`` frames, joined by ``join``; a label's
-    windows are guided by Alg. 1, a neutral segment's end at the given face."""
+    overlapping the one before by ``transition`` frames, joined by ``join``
+    (JOIN_METHODS); a label's windows are guided by Alg. 1, a text's by Alg. 2, a
+    neutral segment's end at the given face."""
 
     steps: int | None = 100  # the filling chapter's chain (Fill)
     variance: str | None = "posterior"
@@ -1112,7 +1113,7 @@ class Long(Sampling):
         if self.feather and self.join == "handshake":
             raise ValueError(
                 "feather spreads the replacement of known frames (joins fill, replace,"
-                " concat); the handshake averages its windows: give feather 0"
+                " concat, learned); the handshake averages its windows: give feather 0"
             )
         if self.opening is not None:
             _check_choice("opening", self.opening, ("N2E", "E2N"))

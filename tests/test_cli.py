@@ -61,7 +61,7 @@ def test_cli_label_task_writes_npz(tmp_path):
         main(["sample", "label", "--label", "grin", "--n", "2", "--steps", "5", "--out", str(out)])
 
 
-def test_cli_long_runs_labels_on_their_data_and_texts_on_the_text_heads(tmp_path, coma_test):
+def test_cli_long_runs_labels_on_their_data_and_texts_on_the_text_heads(tmp_path, coma_test, capsys):
     neutral = tmp_path / "neutral.npz"
     np.savez(neutral, neutral=coma_test.neutral_landmarks(int(coma_test.subjects[0])))
     out, common = tmp_path / "long.npz", ("--neutral", str(neutral), "--n", "1", "--steps", "2")
@@ -75,6 +75,12 @@ def test_cli_long_runs_labels_on_their_data_and_texts_on_the_text_heads(tmp_path
     assert used["text_lr"] == pytest.approx(tasks.text_lr(2))
     assert used["text_guidance_weight"] == config.TEXT_GUIDANCE_WEIGHT
     assert [s["text"] for s in json.loads(str(npz["schedule"]))] == [False, True]
+    npz, used = sample(out, "long", "--seconds", "2", "--join", "learned", *common)
+    assert used["checkpoint"] == "denoiser_coma_join" and npz["landmarks"].shape == (1, 60, 68, 3)
+    with pytest.raises(SystemExit):
+        main(["sample", "long", "--schedule", spec, "--join", "learned", *common, "--out", str(tmp_path / "j.npz")])
+    assert "denoiser_coma+bu_join of the 'coma+bu' data, and none is shipped" in capsys.readouterr().err
+    assert not (tmp_path / "j.npz").exists()
 
 
 def test_cli_text_task_writes_npz(tmp_path, capsys):

@@ -29,10 +29,10 @@ def test_a_schedule_is_read_in_frames_at_the_native_rate():
 
 
 def test_a_text_in_quotes_is_a_segment_of_its_own_commas_and_colons_included():
-    spec = """'mouth_open':1s, "a broad grin, then wider: teeth" : 2s ,high_smile:1s,'free':1.5"""
+    spec = """'mouth open':1s, "a broad grin, then wider: teeth" : 2s ,high_smile:1s,'moving freely':1.5"""
     segments = long.parse_schedule(spec, LABELS)
-    assert segments == [long.Segment("mouth_open", 30, True), long.Segment("a broad grin, then wider: teeth", 60, True),
-                        long.Segment("high_smile", 30), long.Segment("free", 45, True)]
+    assert segments == [long.Segment("mouth open", 30, True), long.Segment("a broad grin, then wider: teeth", 60, True),
+                        long.Segment("high_smile", 30), long.Segment("moving freely", 45, True)]
     assert long.has_text(spec) and long.has_text(segments) and not long.has_text("high_smile:1s")
 
 
@@ -58,7 +58,9 @@ def test_a_text_segment_opens_as_written_or_said_in_order_and_a_label_by_its_raw
     ("high_smile:0.2s", "shorter than a transition"), ("high_smile:1800s, free:1801s", "at most 3600 s"),
     ("high_smile:-1s", "cannot read"), ("high_smile:2 minutes", "cannot read"),
     ('"":2s', "text is empty"), ('"a grin:2s', "cannot read"), ('"a grin":0.1s', "shorter than a transition"),
-    ('"a grin" 2s', "cannot read"), ("high_smile:1s, 'a grin':2s,", "after the last comma")])
+    ('"a grin" 2s', "cannot read"), ("high_smile:1s, 'a grin':2s,", "after the last comma"),
+    ("high_smile:1s,  ", "after the last comma"), ("'mouth_open':1s", "not a text; write it unquoted"),
+    ("high_smile:1s, 'neutral':1s", "'neutral' is a name of the schedule"), ('"free":2s', "not a text")])
 def test_a_bad_schedule_is_a_clear_error(spec, message):
     with pytest.raises(ValueError, match=message):
         long.parse_schedule(spec, LABELS)
@@ -101,6 +103,7 @@ def test_a_text_schedule_is_guided_by_the_text_head_on_its_data(face, text_head,
     # the texts steer: with a larger rate the text segments change, the rest's anchor does not
     other = long.long_sequence(face, segments, 2, text_lr=1.0, **kwargs)
     assert not np.allclose(x[:, :45], other[:, :45])
+    assert np.array_equal(x[:, 74], other[:, 74])  # the rest's end, anchored
     handshake = long.long_sequence(face, segments, 2, join="handshake", **kwargs)
     assert handshake.shape == x.shape and np.isfinite(handshake).all()
 
@@ -112,9 +115,14 @@ def test_the_learned_join_reads_the_known_frames_with_the_join_denoiser(face, gu
     assert x.shape == (2, 105, 68, 3) and np.isfinite(x).all()
     assert np.array_equal(x[:, 0], np.broadcast_to(face, (2, 68, 3)).astype(np.float32))
     assert np.array_equal(x[:, 74], np.broadcast_to(face, (2, 68, 3)).astype(np.float32))  # the rest's end
-    assert not np.allclose(x, long.long_sequence(face, segments, 2, denoiser=denoiser, **kwargs))
+    # the known frames it reads change the windows that know them (the same network, told them or not)
+    join_denoiser = tasks.load_denoiser("denoiser_coma_join")
+    filled = long.long_sequence(face, segments, 2, join="fill", denoiser=join_denoiser, **kwargs)
+    assert not np.allclose(x[:, 40:], filled[:, 40:])
     with pytest.raises(ValueError, match="join 'learned' needs a join denoiser"):
         long.long_sequence(face, segments, 1, join="learned", denoiser=denoiser, **kwargs)
+    with pytest.raises(ValueError, match="none is shipped .* use join fill"):
+        long.long_sequence(face, long.read_schedule("'a broad grin':1.5s"), 1, join="learned", progress=False)
 
 
 def test_labels_and_texts_need_their_own_guides(face, guide, text_head, merged_denoiser, denoiser):

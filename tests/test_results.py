@@ -175,6 +175,8 @@ def test_markdown_table_merges_interval_columns_and_keeps_small_settings(tmp_res
     assert "| FID [95 % interval] | method |" in chosen and "| 2.50 [1.00, 4.00] | ours |" in chosen
     with pytest.raises(ValueError, match="demo has no column 'MM'"):
         results.markdown_table(results.load_result("demo"), columns=["method", "MM"])
+    with pytest.raises(ValueError, match="interval column '95 % interval' must follow its value column 'Acc"):
+        results.markdown_table(results.load_result("demo"), columns=["method", "95 % interval"])
 
 
 def test_intervals_overlap_and_rows_as_dicts(tmp_results):

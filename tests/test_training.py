@@ -11,7 +11,6 @@ import pytest
 import torch
 
 from facelib import config, training
-from facelib.training.loop import Draws
 from facelib.__main__ import main
 from facelib.training import Draws, swap_anatomy, training_anatomies
 from facelib.training.loop import Objective, TrainingLog, device_for, learning_rate

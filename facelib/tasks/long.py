@@ -39,6 +39,7 @@ import torch
 
 from .. import data
 from ..config import (
+    CHECKPOINT_DIR,
     JOIN_METHODS,
     LONG_MAX_SECONDS,
     NATIVE_FPS,
@@ -114,7 +115,7 @@ def _items(spec):
     items, position = [], 0
     while position < len(spec):
         match = _ITEM.match(spec, position)
-        if match is None or (match.group("comma") and match.end() == len(spec)):
+        if match is None or (match.group("comma") and not spec[match.end() :].strip()):
             rest = spec[position:].split(",")[0].strip() if match is None else ""
             raise ValueError(
                 f"cannot read the schedule item {rest!r}"
@@ -148,6 +149,11 @@ def parse_schedule(spec, labels, transition=Long.transition):
     allowed = sorted(labels) + [SCHEDULE_NEUTRAL, SCHEDULE_FREE]
     segments = []
     for what, text, seconds, written in _items(spec):
+        if text and what in allowed:
+            raise ValueError(
+                f"{written!r}: {what!r} is a name of the schedule, not a text; write"
+                f" it unquoted ({what}:{seconds:g}s), or a description in quotes"
+            )
         if not text and what not in allowed:
             raise ValueError(
                 f"unknown expression {what!r} in the schedule; allowed: "
@@ -171,10 +177,15 @@ def parse_schedule(spec, labels, transition=Long.transition):
 
 def read_schedule(spec, settings=Long()):
     """:func:`parse_schedule` with the labels of the data the schedule runs on:
-    ``settings.dataset``'s, or ``settings.text_dataset``'s when it holds a text."""
+    ``settings.dataset``'s, or ``settings.text_dataset``'s when it holds a text (each
+    text checked by the encoder)."""
     dataset = settings.text_dataset if has_text(spec) else settings.dataset
     labels = data.load_dataset(dataset, "train").class_names("I")
-    return parse_schedule(spec, labels, settings.transition)
+    segments = parse_schedule(spec, labels, settings.transition)
+    texts = [s.what for s in segments if s.text]
+    if texts:  # a text the encoder cannot read is refused before anything runs
+        get_encoder().encode(texts)
+    return segments
 
 
 def free_schedule(seconds, transition=Long.transition):
@@ -304,20 +315,33 @@ def _reconstruction(settings, model, diffusion, x0, known):
     )
 
 
+def join_denoiser_name(settings, schedule):
+    """The join denoiser that join "learned" runs for a schedule (a string or
+    Segments): denoiser_<dataset>_join of the data the schedule runs on; a clear error
+    where none is shipped (a schedule with a text runs on the text head's data)."""
+    dataset = settings.text_dataset if has_text(schedule) else settings.dataset
+    name = denoiser_name(dataset, settings.sampler, settings.steps, "join")
+    if not (CHECKPOINT_DIR / f"{name}.pt").exists():
+        raise ValueError(
+            f"join 'learned' runs the join denoiser {name} of the {dataset!r} data, and"
+            " none is shipped (only denoiser_coma_join; a schedule with a text runs on"
+            f" {settings.text_dataset!r}): use join fill, or train one (`python -m"
+            f" facelib train denoiser --dataset {dataset} --set known_frames=0.75`)"
+        )
+    return name
+
+
 def _join_denoiser(settings, denoiser, schedule):
     """The denoiser of join "learned": the given one, which must read known frames, or
-    the shipped denoiser_<dataset>_join (None for the other joins: the default)."""
+    :func:`join_denoiser_name`'s (the given one for the other joins)."""
     if settings.join != "learned":
         return denoiser
     if denoiser is None:
-        dataset = settings.text_dataset if has_text(schedule) else settings.dataset
-        denoiser = load_denoiser(
-            denoiser_name(dataset, settings.sampler, settings.steps, "join")
-        )
+        denoiser = load_denoiser(join_denoiser_name(settings, schedule))
     if not getattr(denoiser.model.config, "known_input", False):
         raise ValueError(
             "join 'learned' needs a join denoiser, which reads the known frames"
-            f" (denoiser_{settings.dataset}_join); this one does not"
+            " (denoiser_<dataset>_join); this one does not"
         )
     return denoiser
 
@@ -605,6 +629,7 @@ __all__ = [
     "Window",
     "free_schedule",
     "has_text",
+    "join_denoiser_name",
     "join_frames",
     "long_sequence",
     "parse_schedule",

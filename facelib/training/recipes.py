@@ -332,7 +332,9 @@ class DenoiserRecipe(Recipe):
         """The known frames (B, F) of a join denoiser's training batch: with probability
         ``known_frames`` the first k ~ U{1..F/2} frames (the transition a window of a
         long sequence knows, config.Long), and half the time the last frame too (the
-        rest's anchor); else none."""
+        anchor of a rest that ends with its window); else none.  A rest that ends inside
+        a window (one that opens a schedule, or lasts no whole number of windows) is
+        anchored at a frame it was not trained with."""
         frames = torch.arange(num_frames, device=self.device)[None]
         given = draws.rand() < self.settings.known_frames
         first = frames < draws.randint(1, num_frames // 2 + 1)[:, None]
