@@ -294,8 +294,7 @@ def _keyframes(args, s, den):
 
 def _long_dataset(args, s):
     """A schedule with a text runs on the text head's data."""
-    texts = args.schedule is not None and tasks.long.has_text(args.schedule)
-    return s.text_dataset if texts else s.dataset
+    return tasks.long.schedule_dataset(s, args.schedule or [])
 
 
 def _long(args, s, den):

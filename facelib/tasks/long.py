@@ -175,11 +175,17 @@ def parse_schedule(spec, labels, transition=Long.transition):
     return segments
 
 
+def schedule_dataset(settings, schedule):
+    """The data a schedule (a string or Segments) runs on: ``settings.dataset``, or
+    ``settings.text_dataset`` when it holds a text."""
+    return settings.text_dataset if has_text(schedule) else settings.dataset
+
+
 def read_schedule(spec, settings=Long()):
     """:func:`parse_schedule` with the labels of the data the schedule runs on:
     ``settings.dataset``'s, or ``settings.text_dataset``'s when it holds a text (each
     text checked by the encoder)."""
-    dataset = settings.text_dataset if has_text(spec) else settings.dataset
+    dataset = schedule_dataset(settings, spec)
     labels = data.load_dataset(dataset, "train").class_names("I")
     segments = parse_schedule(spec, labels, settings.transition)
     texts = [s.what for s in segments if s.text]
@@ -319,7 +325,7 @@ def join_denoiser_name(settings, schedule):
     """The join denoiser that join "learned" runs for a schedule (a string or
     Segments): denoiser_<dataset>_join of the data the schedule runs on; a clear error
     where none is shipped (a schedule with a text runs on the text head's data)."""
-    dataset = settings.text_dataset if has_text(schedule) else settings.dataset
+    dataset = schedule_dataset(settings, schedule)
     name = denoiser_name(dataset, settings.sampler, settings.steps, "join")
     if not (CHECKPOINT_DIR / f"{name}.pt").exists():
         raise ValueError(
@@ -636,5 +642,6 @@ __all__ = [
     "plan_windows",
     "read_schedule",
     "resample_fps",
+    "schedule_dataset",
     "stream",
 ]
