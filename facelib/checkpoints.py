@@ -2,9 +2,11 @@
 style).
 
 The JSON records the sha256 of the .pt; loading checks it, so a corrupted or swapped
-weight file is reported instead of silently producing garbage.  Loading also checks that
-the checkpoint is of the expected kind and that its weights fit the architecture its
-config describes.
+weight file is reported instead of silently producing garbage (a file is hashed once per
+process while its path, mtime and size stay the same).  Loading also checks that the
+checkpoint is of the expected kind, that the datasets it read have not changed since
+(their entries of data/synthetic/fingerprints.json) and that its weights fit the
+architecture its config describes.
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import json
+import time
 from pathlib import Path
 
 import torch
@@ -21,6 +24,27 @@ from . import config
 
 def _sha256(path):
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+# {(resolved path, st_mtime_ns, st_size): sha256} of the .pt files whose sha256 matched
+# their metadata in this process
+_VERIFIED = {}
+# a file modified less than this long ago is hashed on every load: a rewrite within the
+# filesystem's timestamp granularity could keep both its mtime and its size
+_SETTLED_NS = 2 * 10**9
+
+
+def _checked_sha256(pt, recorded):
+    """The sha256 of ``pt``, read from the cache when this file (path, mtime, size) has
+    already matched ``recorded`` in this process."""
+    st = pt.stat()
+    key = (str(pt.resolve()), st.st_mtime_ns, st.st_size)
+    if key in _VERIFIED and _VERIFIED[key] == recorded:
+        return recorded
+    actual = _sha256(pt)
+    if actual == recorded and time.time_ns() - st.st_mtime_ns > _SETTLED_NS:
+        _VERIFIED[key] = actual
+    return actual
 
 
 def checkpoint_paths(name):
@@ -67,32 +91,96 @@ def checkpoint_name(kind, dataset=None, variant=None, seed=0):
     return name + (f"_seed{seed}" if seed else "")
 
 
-def world_fingerprint():
-    """The synthetic world this process builds: {"version": config.WORLD, "fingerprint":
-    the first 12 hex digits of the sha256 of its committed dataset fingerprints
-    (data/synthetic/fingerprints.json)}.
+def _fingerprints_file():
+    return config.SYNTHETIC_DIR / "fingerprints.json"
+
+
+def dataset_fingerprints():
+    """{entry of data/synthetic/fingerprints.json (a dataset at a length, e.g.
+    "coma-F40"): the first 12 hex digits of the sha256 of the entry's canonical JSON};
+    None when the file is absent."""
+    path = _fingerprints_file()
+    if not path.exists():
+        return None
+    return {
+        key: hashlib.sha256(json.dumps(entry, sort_keys=True).encode()).hexdigest()[:12]
+        for key, entry in json.loads(path.read_text()).items()
+    }
+
+
+def datasets_read(meta):
+    """The entries of fingerprints.json a checkpoint read, from its metadata: those of
+    the datasets its training names ("coma", "bu", "coma+bu": every "<name>-F<frames>"),
+    a deformer's those of config.DEFORMATION_DATASET, all when it names none."""
+    if meta.get("kind") == "deformer":
+        names = config.DEFORMATION_DATASET
+    else:
+        names = (meta.get("training") or {}).get("dataset")
+    keys = sorted(dataset_fingerprints() or {})
+    if not names:
+        return keys
+    return [k for k in keys if any(k.startswith(f"{n}-F") for n in names.split("+"))]
+
+
+def world_fingerprint(datasets=None):
+    """The synthetic world this process builds: {"version": config.WORLD,
+    "fingerprint": the first 12 hex digits of the sha256 of its committed dataset
+    fingerprints (data/synthetic/fingerprints.json), "datasets": {entry: its digest}
+    (:func:`dataset_fingerprints`) of the entries named in ``datasets`` (None: all)}.
     """
-    path = config.SYNTHETIC_DIR / "fingerprints.json"
+    path = _fingerprints_file()
     digest = (
         hashlib.sha256(path.read_bytes()).hexdigest()[:12] if path.exists() else None
     )
-    return {"version": config.WORLD, "fingerprint": digest}
+    entries = dataset_fingerprints() or {}
+    return {
+        "version": config.WORLD,
+        "fingerprint": digest,
+        "datasets": {
+            k: v for k, v in entries.items() if datasets is None or k in datasets
+        },
+    }
+
+
+def changed_datasets(recorded):
+    """The entries of a recorded {dataset entry: digest} that differ in this process's
+    fingerprints.json: [(entry, recorded digest, current digest or None if gone)];
+    empty when the file is absent (nothing to compare with)."""
+    current = dataset_fingerprints()
+    if current is None:
+        return []
+    return [(k, d, current.get(k)) for k, d in recorded.items() if current.get(k) != d]
 
 
 def check_world(meta, name):
     """A checkpoint's metadata must name the world of this process (world 1's
-    checkpoints predate the record and name none); a clear error naming both worlds and
-    the retrain command if not.
+    checkpoints predate the record and name none) and the datasets it read as they are
+    now (older records without "datasets": the whole fingerprints.json); a clear error
+    naming the worlds or datasets and the retrain command if not.
     """
     recorded = meta.get("world", {"version": 1, "fingerprint": None})
     current = world_fingerprint()
     known = None not in (recorded["fingerprint"], current["fingerprint"])
+    changed = changed_datasets(recorded.get("datasets", {}))
     if recorded["version"] != current["version"]:
         why = (
             f"was trained on world {recorded['version']}, but this process builds world"
             f" {current['version']}"
         )
-    elif known and recorded["fingerprint"] != current["fingerprint"]:
+    elif "datasets" in recorded and changed:
+        why = (
+            f"was trained on world {current['version']}'s datasets as they were; they"
+            " have changed since: "
+            + ", ".join(
+                f"{k} (fingerprint {old}, now {new or 'no entry in fingerprints.json'})"
+                for k, old, new in changed
+            )
+        )
+    elif (
+        "datasets" not in recorded
+        and known
+        and recorded["fingerprint"] != current["fingerprint"]
+    ):
         why = (
             f"was trained on world {current['version']}'s datasets as they were"
             f" (fingerprint {recorded['fingerprint']}); they have changed since"
@@ -107,16 +195,17 @@ def check_world(meta, name):
 
 
 def save_checkpoint(name, model, kind, model_config, **metadata):
-    """Write ``name``.pt (state_dict) and ``name``.json (kind, config, sha256, world,
-    metadata)."""
+    """Write ``name``.pt (state_dict) and ``name``.json (kind, config, sha256, world:
+    with the fingerprints of the datasets it read (:func:`datasets_read`), metadata)."""
     pt, js = checkpoint_paths(name)
     pt.parent.mkdir(parents=True, exist_ok=True)
     torch.save({k: v.detach().cpu() for k, v in model.state_dict().items()}, pt)
+    read = datasets_read({"kind": kind, **metadata})
     meta = {
         "kind": kind,
         "config": model_config,
         "sha256": _sha256(pt),
-        "world": world_fingerprint(),
+        "world": world_fingerprint(read),
         **metadata,
     }
     js.write_text(json.dumps(meta, indent=1) + "\n")
@@ -168,7 +257,7 @@ def load_checkpoint(name, kind, build):
             f"checkpoint {pt.name} is a {meta.get('kind')!r} checkpoint, expected"
             f" {kind!r}"
         )
-    actual = _sha256(pt)
+    actual = _checked_sha256(pt, meta.get("sha256"))
     if actual != meta.get("sha256"):
         raise ValueError(
             f"checkpoint {pt.name} is corrupted or does not match its metadata: sha256"

@@ -7,16 +7,17 @@ it: the exact command, the facelib commit, the sha256 of every checkpoint it use
 seeds, n, steps, the wall time and the number of cores.
 
 A stored result is *stale* when a checkpoint it names no longer has the sha256 it
-recorded (the model was retrained after the experiment ran), when the datasets it
-records were built by another world (their fingerprint changed), or when a default of
-the settings it records (the config dataclasses a benchmark names as measured) has
-changed since (e.g. ``config.Fill.steps``): :func:`problems` says so, naming the file
-and what changed, and a test fails on every stale or malformed file. Files are written
-to a temporary file and renamed, so an interrupted command leaves the previous result
-intact. A result is not saved from a tree whose facelib/ or benchmarks/ have uncommitted
-changes (its commit would not name the code that made it), unless the command's
-``--allow-dirty`` says so, which the result then records. Rows merged from several runs
-(:func:`merged_rows`) each keep the provenance of the run that made them
+recorded (the model was retrained after the experiment ran), when it was made on another
+world or on datasets that have changed since (the entries of
+data/synthetic/fingerprints.json it records; a dataset added since changes nothing), or
+when a default of the settings it records (the config dataclasses a benchmark names as
+measured) has changed since (e.g. ``config.Fill.steps``): :func:`problems` says so,
+naming the file and what changed, and a test fails on every stale or malformed file.
+Files are written to a temporary file and renamed, so an interrupted command leaves the
+previous result intact. A result is not saved from a tree whose facelib/ or benchmarks/
+have uncommitted changes (its commit would not name the code that made it), unless the
+command's ``--allow-dirty`` says so, which the result then records. Rows merged from
+several runs (:func:`merged_rows`) each keep the provenance of the run that made them
 (``row_provenance``).
 """
 
@@ -33,7 +34,7 @@ from pathlib import Path
 import torch
 
 from . import config, tables
-from .checkpoints import checkpoint_paths, world_fingerprint
+from .checkpoints import changed_datasets, checkpoint_paths, world_fingerprint
 
 RESULTS_DIR = config.RESULTS_DIR
 SCHEMA = 1
@@ -274,8 +275,9 @@ def merged_rows(name, rows, key_length=1):
 
 def problems(record, path="result"):
     """What is wrong with a stored result: missing or mistyped fields, another schema,
-    rows that do not fit the columns, or checkpoints whose sha256 changed since it ran.
-    Empty when it is sound.
+    rows that do not fit the columns, another world or changed datasets
+    (:func:`world_changes`), changed settings, or checkpoints whose sha256 changed since
+    it ran.  Empty when it is sound.
     """
     found = []
     for key, kind in FIELDS.items():
@@ -312,11 +314,11 @@ def problems(record, path="result"):
             f"{path}: {len(record['row_provenance'])} row provenances for"
             f" {len(record['rows'])} rows"
         )
-    if record.get("world") not in (None, world_fingerprint()):
-        found.append(
-            f"{path}: stale, made on the datasets of world {record['world']}, this"
-            f" process builds {world_fingerprint()}; re-run: {record['command']}"
-        )
+    if isinstance(record.get("world"), dict):
+        found += [
+            f"{path}: stale, {change}; re-run: {record['command']}"
+            for change in world_changes(record["world"])
+        ]
     if isinstance(record.get("settings", {}), dict):
         found += [
             f"{path}: stale, {change}; re-run: {record['command']}"
@@ -335,6 +337,24 @@ def problems(record, path="result"):
                 f" {record['command']}"
             )
     return found
+
+
+def world_changes(recorded):
+    """What changed in the world a result recorded: its version, or the fingerprints of
+    the datasets it recorded ("datasets"; a dataset added since changes nothing), or,
+    in a record without them (older results), the whole fingerprints.json."""
+    current = world_fingerprint()
+    now = {k: current[k] for k in ("version", "fingerprint")}
+    then = {k: recorded.get(k) for k in now}
+    if "datasets" not in recorded or then["version"] != now["version"]:
+        if then == now:
+            return []
+        return [f"made on the datasets of world {then}, this process builds {now}"]
+    return [
+        f"made on world {current['version']}'s dataset {k} at fingerprint {old}, which"
+        f" is {new or 'no entry in fingerprints.json'} now"
+        for k, old, new in changed_datasets(recorded["datasets"])
+    ]
 
 
 def settings_changes(recorded):

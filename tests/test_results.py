@@ -1,6 +1,7 @@
 """Stored results (results/*.json): sound, fresh (checkpoint hashes match the shipped ones), and
 written atomically; bootstrap intervals behave like intervals."""
 import json
+import re
 
 import numpy as np
 import pytest
@@ -217,3 +218,36 @@ def test_stored_numbers_keep_six_significant_digits_so_small_settings_survive():
     from facelib.results import _plain
     assert _plain({"kl_weight": 1e-05, "acc": np.float64(85.20710059), "rows": [0.000123456789]}) == \
         {"kl_weight": 1e-05, "acc": 85.2071, "rows": [0.000123457]}
+
+
+def _fingerprints_file(monkeypatch, tmp_path, change):
+    """Point the process at a copy of data/synthetic/fingerprints.json that ``change`` (a function of its
+    entries) edited."""
+    from facelib import config
+    entries = json.loads((config.SYNTHETIC_DIR / "fingerprints.json").read_text())
+    change(entries)
+    (tmp_path / "synthetic").mkdir(parents=True)
+    (tmp_path / "synthetic" / "fingerprints.json").write_text(json.dumps(entries, indent=2) + "\n")
+    monkeypatch.setattr(config, "SYNTHETIC_DIR", tmp_path / "synthetic")
+
+
+def test_a_new_dataset_leaves_every_stored_result_as_it_was(monkeypatch, tmp_path):
+    records = {name: json.loads(results.result_path(name).read_text()) for name in results.stored_results()}
+    before = {name: results.problems(record, f"{name}.json") for name, record in records.items()}
+    _fingerprints_file(monkeypatch, tmp_path, lambda e: e.update({"speech-F40": {"num_sequences": 1}}))
+    assert {name: results.problems(record, f"{name}.json") for name, record in records.items()} == before
+    assert sum("datasets" in record.get("world", {}) for record in records.values()) > 20
+
+
+def test_a_result_is_stale_when_a_dataset_it_recorded_changes_and_not_when_one_is_added(tmp_results,
+                                                                                         monkeypatch):
+    record = json.loads(_save().read_text())
+    assert set(record["world"]["datasets"]) >= {"coma-F40", "bu-F40"} and results.problems(record) == []
+    _fingerprints_file(monkeypatch, tmp_results, lambda e: e.update({"speech-F40": {"num_sequences": 1}}))
+    assert results.problems(record) == []
+    monkeypatch.undo()
+    monkeypatch.setattr(results, "RESULTS_DIR", tmp_results)
+    _fingerprints_file(monkeypatch, tmp_results / "changed", lambda e: e["bu-F40"].update(num_sequences=1))
+    found = results.problems(record, "demo.json")
+    assert len(found) == 1 and re.match(r"demo\.json: stale, made on world 2's dataset bu-F40 at fingerprint \w{12},"
+                                        r" which is \w{12} now; re-run: python -m facelib experiment demo", found[0]), found
