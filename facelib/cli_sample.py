@@ -300,7 +300,7 @@ def _long_dataset(args, s):
 def _long(args, s, den):
     if (args.schedule is None) == (args.seconds is None):
         raise ValueError("give either --schedule or --seconds (not both)")
-    face = _neutral(args.neutral)
+    face = None if args.neutral is None else _neutral(args.neutral)
     schedule = (
         tasks.long.read_schedule(args.schedule, s)
         if args.schedule is not None
@@ -342,6 +342,7 @@ class Task:
     inputs: tuple = ()  # ((flags...), argparse keywords) of the task's own inputs
     in_paper: bool = True  # --paper: the paper's printed algorithm
     takes_n: bool = True
+    default_n: int = 16  # --n's default
     usage: str | None = None
     # (args, settings) -> the data of the denoiser, when the inputs decide it (None:
     # settings.dataset)
@@ -494,16 +495,18 @@ TASKS = {
             (
                 ("--neutral",),
                 dict(
-                    required=True,
+                    default=None,
                     help=(
                         ".npz with the neutral landmarks (68, 3) in mm of the face"
                         " (key 'neutral' or 'landmarks'), its first frame and every"
-                        " rest's last"
+                        " rest's last (default: a new face of the world, drawn with"
+                        " --seed)"
                     ),
                 ),
             ),
         ),
         in_paper=True,
+        default_n=1,
         usage=LONG,
         dataset=_long_dataset,
     ),
@@ -615,7 +618,10 @@ def add_task_parser(parsers, task, io, name=None, note=""):
     p.set_defaults(func=run, task=task)
     if spec.takes_n:
         p.add_argument(
-            "--n", type=int, default=16, help="number of sequences (default 16)"
+            "--n",
+            type=int,
+            default=spec.default_n,
+            help=f"number of sequences (default {spec.default_n})",
         )
     if spec.in_paper:
         p.add_argument(

@@ -24,11 +24,12 @@ DATA_DIR = Path(os.environ.get("FACELIB_DATA_DIR", PROJECT_ROOT / "data"))
 # The synthetic world's version.  Version 2 (issue 25; facelib/face/tissue.py: tissue
 # mechanics, magnitudes calibrated to published measurements of real faces) replaced
 # version 1, whose faces moved far less than real ones.  The dataset caches are named
-# after the version, and every checkpoint records it with the datasets' fingerprint: one
-# of another version is refused with the command that retrains it
-# (checkpoints.check_world), and a stored result whose checkpoints changed is flagged
-# stale (tests/test_results.py). ``face.Face(..., world=1)`` remains only for chapter
-# 01's comparison of the two versions (WORLDS).
+# after the version, and every checkpoint records it with the fingerprints of the
+# datasets it read: one of another version, or of a dataset since changed, is refused
+# with the command that retrains it (checkpoints.check_world), and a stored result whose
+# checkpoints or datasets changed is flagged stale (tests/test_results.py).
+# ``face.Face(..., world=1)`` remains only for chapter 01's comparison of the two
+# versions (WORLDS).
 WORLD = 2
 WORLDS = (1, 2)
 SYNTHETIC_DIR = DATA_DIR / "synthetic"
@@ -549,9 +550,10 @@ LABEL_GUIDANCE = ("classifier", "cfg")
 MEAN_SHIFT_SCALE = 10.0
 CFG_SCALE = 2.5  # classifier-free guidance's weight w: MDM's (Tevet et al. 2023)
 # Our choice: below this abar_t, x_t holds no signal (the rectified flow's t = T: abar
-# 2.5e-10; the linear schedule's abar_T is 4e-5), and the mean shift under DDIM, whose
-# x0_hat moves by 1 / sqrt(abar_t) times its change of eps, guides nothing there
-# (chapter 14: one guided step from the flow's pure noise moved x_t 90 times its norm)
+# 2.5e-10; the linear schedule's abar_T is 1.6e-9, below 1e-6 from t = 1652), and the
+# mean shift under DDIM, whose x0_hat moves by 1 / sqrt(abar_t) times its change of
+# eps, guides nothing there (chapter 14: one guided step from the flow's pure noise
+# moved x_t 90 times its norm)
 GUIDANCE_MIN_ABAR = 1e-6
 # The mean shift's scale for editing (config.Edit; our choice): 20, where 3 edits in 4
 # read the new label with the neutral frame kept (results/fast_sampling_edit.json: 56 %
@@ -719,9 +721,15 @@ class Sampling:
         # §4: T = 2000, sigma_t^2 = beta_t
         return replace(self, steps=None, variance="beta", sampler="ddpm", eta=0.0)
 
+    # the chain of fast mode (FACELIB_FAST=1); a task whose demos need fewer names its
+    # own
+    fast_steps = 20
+
     def fast(self):
         # a student samples on the steps it was distilled for, and only there
-        return self if self.sampler == "student" else replace(self, steps=20)
+        if self.sampler == "student":
+            return self
+        return replace(self, steps=self.fast_steps)
 
 
 @dataclass(frozen=True)
@@ -1153,8 +1161,7 @@ class Long(Sampling):
             super().paper(), join="replace", reconstruction_scale=0.0, feather=0.0
         )
 
-    def fast(self):
-        return replace(self, steps=10)
+    fast_steps = 10
 
 
 @dataclass(frozen=True)
@@ -1194,8 +1201,7 @@ class GeometryAdaptive(Sampling):
             resample=1,
         )
 
-    def fast(self):
-        return replace(self, steps=10)
+    fast_steps = 10
 
 
 # millimetres per unit of a reader's mesh (the chapter "Your own face")

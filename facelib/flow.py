@@ -32,7 +32,7 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
-from .diffusion import flow_alphas_bar, masked_mean
+from .diffusion import device_of, flow_alphas_bar, masked_mean
 
 SOLVERS = ("euler", "heun")
 
@@ -47,6 +47,20 @@ def check_solver(solver):
     if solver not in SOLVERS:
         raise ValueError(
             f"unknown ODE solver {solver!r}; allowed: {', '.join(SOLVERS)}"
+        )
+
+
+def check_flow_model(model):
+    """A clear error unless ``model`` is a denoiser trained as a rectified flow
+    (``DenoiserConfig(schedule="flow", prediction="u")``): another network's output is
+    no velocity on this path."""
+    c = getattr(model, "config", None)
+    made_for = (getattr(c, "schedule", None), getattr(c, "prediction", None))
+    if made_for != ("flow", "u"):
+        raise ValueError(
+            "the rectified flow samples a denoiser trained as a flow (schedule 'flow',"
+            f" prediction 'u'), got one of schedule {made_for[0]!r} and prediction"
+            f" {made_for[1]!r}: sample it by its GaussianDiffusion (DDPM or DDIM)"
         )
 
 
@@ -119,7 +133,8 @@ class RectifiedFlow:
         Euler step's end point corrected by the mean of the two slopes; the last step,
         to tau = 0, stays Euler as in Karras et al. 2022): 2 K - 1 network calls."""
         check_solver(solver)
-        device = next(iter(model.parameters())).device
+        check_flow_model(model)
+        device = device_of(model) or torch.device("cpu")
         if x is None:
             x = torch.randn(shape, generator=generator).to(device)
         grid = self.times(steps)

@@ -57,9 +57,8 @@ def retrieval_by_noise(head, denoiser, dataset, encoder, t_grid, read="x_t", see
         tt = torch.full((len(x0),), t)
         x = denoiser.diffusion.q_sample(x0, tt, generator=gen)
         if read == "x0_hat":
-            x, tt = denoiser.diffusion.predict_x0(
-                x, tt, denoiser.model(x, tt.float())
-            ), torch.zeros_like(tt)
+            x = denoiser.diffusion.model_estimates(denoiser.model, x, tt)[1]
+            tt = torch.zeros_like(tt)
         out = head.model.embed(x, tt.float())
         label_right = ((out @ raw.T).argmax(1).numpy() == dataset.labels).mean()
         rows.append(

@@ -92,7 +92,7 @@ def test_a_student_samples_on_its_own_steps_and_refuses_others(tmp_path):
     student = tasks.load_denoiser(str(tmp_path / "s"))
     chain = student.diffusion_with()
     assert chain.timesteps.tolist() == [0, 500, 1000, 1500, 2000] and chain.eta == 0.0
-    x = tasks.unconditional(2, steps=4, denoiser=student, progress=False)
+    x = tasks.unconditional(2, steps=4, sampler="student", denoiser=student, progress=False)
     assert x.shape == (2, 40, 68, 3) and np.isfinite(x).all()
     for bad in ({"steps": 3}, {"steps": 4, "eta": 1.0}):
         with pytest.raises(ValueError, match="distilled student of 4 deterministic steps"):

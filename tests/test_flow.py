@@ -199,8 +199,10 @@ def test_label_control_guides_the_flow_with_the_linear_schedules_classifier():
     settings = config.LabelControl(steps=4, sampler="flow")
     _, chain, matched = tasks.loading.guided_chain(guide, flow, settings)
     assert isinstance(matched.model, NoiseLevelMatched) and chain.eta == 0.0
-    _, _, same = tasks.loading.guided_chain(guide, ref, settings)
+    _, _, same = tasks.loading.guided_chain(guide, ref, config.LabelControl(steps=4, sampler="ddim"))
     assert same is guide  # its own schedule: unchanged
+    with pytest.raises(ValueError, match="denoiser_coma is sampled by 'ddpm' or 'ddim', not by 'flow'"):
+        tasks.loading.guided_chain(guide, ref, settings)
     x = tasks.label_control("high_smile", 2, steps=4, sampler="flow", denoiser=flow,
                             guide=guide, progress=False)
     assert x.shape == (2, 40, 68, 3) and np.isfinite(x).all()

@@ -93,7 +93,7 @@ class OptimisationGuidance:
 
     max_time (not in the paper): leave the steps whose time label t is above it
     unguided, where the guide reads nothing but noise (None: guide every step, as Alg. 1
-    and 2 do)."""
+    and 2 do; :meth:`GaussianDiffusion.guides`)."""
 
     score: Callable
     diffusion: GaussianDiffusion
@@ -120,10 +120,7 @@ class OptimisationGuidance:
         return self.guidance_weight * log_p_theta(x, out) + self.score(x, t_prev)
 
     def __call__(self, x_hat, xt, t, out):
-        if (
-            self.max_time is not None
-            and float(self.diffusion.timesteps[t]) > self.max_time
-        ):
+        if not self.diffusion.guides(t, self.max_time):
             return x_hat
         t_prev = steps_of(t - 1, x_hat)
         x = x_hat.detach().clone().requires_grad_(True)
@@ -140,8 +137,12 @@ class OptimisationGuidance:
 @dataclass
 class MeanShiftGuidance:
     """Classic classifier guidance: shift the sample by scale * sigma_t^2 * grad_{x_t}
-    score(x_t, t); under DDIM, take the step with eps - scale * sqrt(1 - abar_t) *
-    grad_{x_t} score(x_t, t) instead.
+    score(x_t, t) on the ancestral chain; on a DDIM chain (any eta, the deterministic
+    samplers included), take the step with eps - scale * sqrt(1 - abar_t) * grad_{x_t}
+    score(x_t, t) instead.  The two agree to first order in beta_t at eta = 1, where
+    DDIM's step is the ancestral one with the posterior variance.  Under DDIM the steps
+    whose x_t holds less than config.GUIDANCE_MIN_ABAR of signal are left unguided
+    (:meth:`GaussianDiffusion.guides`), and their score is not read.
     """
 
     score: Callable
@@ -153,15 +154,16 @@ class MeanShiftGuidance:
         self.score = _for_chain(self.score, self.diffusion)
 
     def __call__(self, x_hat, xt, t, out):
+        d = self.diffusion
+        # pure noise under DDIM: see config.GUIDANCE_MIN_ABAR
+        if not d.guides(t, min_abar=0.0 if d.eta is None else GUIDANCE_MIN_ABAR):
+            return x_hat
         grad = gradient_at(xt, lambda x: self.score(x, steps_of(t, x)))
-        if self.diffusion.eta is None:
+        if d.eta is None:
             return x_hat + self.scale * out["guidance_variance"] * grad
         # DDIM (Dhariwal & Nichol 2021, Alg. 2):
         # eps_hat = eps - s sqrt(1 - abar_t) grad, the step taken with eps_hat (and the
         # x0_hat it implies: the model's own moved by Eq. 6's change for eps_hat - eps)
-        d = self.diffusion
-        if d.alphas_bar[t] < GUIDANCE_MIN_ABAR:  # pure noise: see config
-            return x_hat
         shift = -self.scale * float(d.sqrt_one_minus_alphas_bar[t]) * grad
         x0 = (
             out["x0"]
@@ -183,12 +185,13 @@ class ReconstructionGuidance:
     the denoiser.  The norm (not its square) makes the step size independent of how far
     off the estimate is (DPS).  Costs one backward pass per step.
 
-    On a deterministic chain (DDIM at eta = 0, a distilled student, the flow) the step
-    is ``scale * sqrt(abar_t) * grad``: the gradient carries the 1 / sqrt(abar_t) of
-    x0_hat (about 150 at t = T on the linear schedule; its norm is about 400 there), a
-    push that an ancestral chain forgets under its fresh noise but a deterministic one
-    keeps to the end (filling with DDIM-50: 57 mm off on the missing frames without
-    the factor, 0.7 mm with it; chapter 14).
+    The step is ``scale * chain.guidance_push(t) * grad``: the gradient carries the 1 /
+    sqrt(abar_t) of x0_hat (about 150 at t = T on the linear schedule; its norm is
+    about 400 there), a push that the ancestral chain shrinks by sqrt(abar_t) on its
+    way down but a deterministic one keeps to the end; the factor, sqrt(abar_t)^(1 -
+    eta^2), makes every chain keep the same share of it, DDIM's at any eta included
+    (:meth:`GaussianDiffusion.guidance_push`; filling with DDIM-50 at eta = 0: 57 mm
+    off on the missing frames without the factor, 0.7 mm with it; chapter 14).
     """
 
     model: torch.nn.Module
@@ -217,10 +220,8 @@ class ReconstructionGuidance:
         return (squared * known).sum((1, 2)).clamp_min(1e-20).sqrt()
 
     def __call__(self, x_hat, xt, t, out):
-        step = self.scale * gradient_at(xt, lambda x: self.known_error(x, t))
-        if self.diffusion.eta == 0:  # deterministic: see the class docstring
-            step = step * float(self.diffusion.sqrt_alphas_bar[t])
-        return x_hat - step
+        push = self.scale * self.diffusion.guidance_push(t)  # see the class docstring
+        return x_hat - push * gradient_at(xt, lambda x: self.known_error(x, t))
 
 
 def best_particles(x, score, t, particles):

@@ -137,9 +137,9 @@ class AUCurveScore(_ChainScore):
         if self.denoiser is None:
             read = self.network(x, t)
         else:
-            x0_hat = self.diffusion.predict_x0(
-                x, t.detach().round().long().cpu(), self.denoiser(x, t)
-            )
+            # the denoiser's own estimate (a flow's near T, where Eq. 6 inverted
+            # would divide by sqrt(abar_t) ~ 1e-5)
+            _, x0_hat = self.diffusion.model_estimates(self.denoiser, x, t)
             read = self.network(x0_hat, torch.zeros_like(t))
         squared = torch.where(
             m, (read - c) ** 2, torch.zeros((), dtype=x.dtype, device=x.device)
@@ -275,17 +275,18 @@ class ContrastiveScore(_ChainScore):
 @dataclass
 class DenoisedCosineScore:
     """score(x, t) = cos(BiT(x0_hat(x, t), 0), E(c)) (B,): Eq. 10 read on the denoiser's
-    estimate x0_hat(x, t) = (x - sqrt(1 - abar_t) eps_theta(x, t)) / sqrt(abar_t) (Eq. 6
-    inverted) instead of on x (not in the paper; the "forward universal guidance" of
-    Bansal et al. 2023).
+    estimate x0_hat(x, t) (its own, :meth:`GaussianDiffusion.model_estimates`: for an
+    eps network (x - sqrt(1 - abar_t) eps_theta(x, t)) / sqrt(abar_t), Eq. 6 inverted)
+    instead of on x (not in the paper; the "forward universal guidance" of Bansal et al.
+    2023).
 
     At large t, x holds a factor sqrt(abar_t) of the sequence (a few per cent at t =
     1000), too little for a head to read the order of an expression; the denoiser's
-          estimate is a clean-looking sequence at
-    every t, read by the head as at t = 0, and the gradient reaches x through the
-    denoiser.  Being a function of x, the estimate holds no more of the order than x
-    does.  Costs a denoiser forward and backward pass per Adagrad step.  ``diffusion``:
-    the chain whose steps t are (see :meth:`for_chain`).
+    estimate is a clean-looking sequence at every t, read by the head as at t = 0, and
+    the gradient reaches x through the denoiser.  Being a function of x, the estimate
+    holds no more of the order than x does.  Costs a denoiser forward and backward pass
+    per Adagrad step.  ``diffusion``: the chain whose steps t are (see
+    :meth:`for_chain`).
     """
 
     network: torch.nn.Module  # the text head, read at time 0
@@ -299,9 +300,6 @@ class DenoisedCosineScore:
         )
 
     def __call__(self, x, t):
-        steps = t.detach().round().long().cpu()
-        x0_hat = self.diffusion.predict_x0(
-            x, steps, self.diffusion.wrap(self.denoiser)(x, t)
-        )
+        _, x0_hat = self.diffusion.model_estimates(self.denoiser, x, t)
         e = _repeated(torch.as_tensor(self.text_embeddings), len(x)).to(x.device)
         return self.network.cosine(x0_hat, torch.zeros_like(t), e)

@@ -43,10 +43,11 @@ def invert(
     denoiser, sequences, settings=Edit(), model=None, progress=False, trajectory=False
 ):
     """x_T of each sequence (n, F, 68, 3) in mm under the chain of ``settings`` (DDIM
-    inversion), normalised; ``model``: the eps network to invert with (default the
-    denoiser's own); ``trajectory``: every x_t, t = 0..K.
+    inversion on the very chain that regenerates: its steps, spacing and variance),
+    normalised; ``model``: the eps network to invert with (default the denoiser's own);
+    ``trajectory``: every x_t, t = 0..K.
     """
-    chain = denoiser.diffusion_with(settings.steps, settings.variance, 0.0)
+    chain = denoiser.chain_for(settings)
     x0 = torch.as_tensor(
         denoiser.normalizer.normalize(check_sequences(sequences)), dtype=torch.float32
     )

@@ -119,9 +119,27 @@ class TrainedDenoiser:
             )
         return diffusion if eta is None else diffusion.with_eta(eta)
 
+    @property
+    def samplers(self):
+        """The samplers this checkpoint was made for: a distilled student's ("student",
+        on its own steps), a rectified flow's ("flow", Euler's steps), any other
+        denoiser's ("ddpm", "ddim")."""
+        if self.meta.get("training", {}).get("sampler_steps") is not None:
+            return ("student",)
+        if self.model.config.schedule == "flow":
+            return ("flow",)
+        return ("ddpm", "ddim")
+
     def chain_for(self, settings):
         """The chain of a task's settings (config.Sampling: steps, variance, sampler,
-        spacing)."""
+        spacing); a clear error for a sampler this checkpoint was not made for."""
+        if settings.sampler not in self.samplers:
+            raise ValueError(
+                f"{self.meta.get('name', 'this checkpoint')} is sampled by"
+                f" {' or '.join(map(repr, self.samplers))}, not by"
+                f" {settings.sampler!r} (tasks.denoiser_name names the checkpoint of"
+                " each sampler)"
+            )
         return self.diffusion_with(
             settings.steps, settings.variance, settings.ddim_eta, settings.spacing
         )

@@ -57,6 +57,8 @@ from ..guidance import (
     ReconstructionGuidance,
     chain,
 )
+from ..face import Face, sample_identity
+from ..face.aus import NUM_AUS
 from ..inpainting import KnownFrames, KnownInput, keep_known, neutral_faces
 from ..metrics import resample_frames
 from ..text import check_text, get_encoder
@@ -408,6 +410,13 @@ def _models(settings, denoiser, guide, order_guide, text_head, schedule):
     return denoiser, diffusion, guides
 
 
+def drawn_face(seed):
+    """The neutral landmarks (68, 3) in mm of a new identity of the world drawn with
+    ``seed`` (the face `python -m facelib neutral --seed SEED` writes): where a stream
+    given no face starts and rests, as the other tasks draw their faces."""
+    return Face(sample_identity(seed)).landmarks(np.zeros(NUM_AUS))
+
+
 def _check(neutral, schedule, n, settings, overrides):
     if not isinstance(settings, Long):
         raise TypeError(
@@ -415,6 +424,8 @@ def _check(neutral, schedule, n, settings, overrides):
         )
     settings = with_overrides(settings, overrides)
     check_n(n)
+    if neutral is None:
+        neutral = drawn_face(settings.seed)
     face = neutral_faces(neutral, n, "the neutral face")
     if isinstance(schedule, str):
         raise ValueError(
@@ -439,8 +450,9 @@ def stream(
     **overrides,
 ):
     """Generate n long sequences of the face ``neutral`` (68, 3) in mm (or one face
-    per sequence, (n, 68, 3)), following ``schedule`` (a list of :class:`Segment`,
-    :func:`parse_schedule`), window by window: yields the new frames of each window,
+    per sequence, (n, 68, 3); None: :func:`drawn_face` of the seed), following
+    ``schedule`` (a list of :class:`Segment`, :func:`parse_schedule`), window by
+    window: yields the new frames of each window,
     (n, k, 68, 3) float32 in mm at :data:`NATIVE_FPS`, as soon as they are made.
     Joins "fill", "replace", "concat" and "learned" (``settings.join``); memory is that
     of one window.  A schedule of labels is guided by ``guide`` (type I) and
@@ -490,21 +502,29 @@ def stream(
 class Handshake:
     """The sampler hook of DoubleTake's first take over a batch of windows (n streams x
     W windows, stream-major): ``inner`` (the rows' guidance and anchors), then the
-    frames two consecutive windows share set to their mean."""
+    frames two consecutive windows share set to their mean, where neither copy is
+    anchored (``known`` (n W, F) bool); where one is, both take its value, so that an
+    anchor inside a shared block holds at every step, not half of it."""
 
     inner: object
     windows: list
     n: int
     transition: int
+    known: torch.Tensor
 
     def __call__(self, x_hat, xt, t, out):
         x = self.inner(x_hat, xt, t, out)
         w, o = len(self.windows), self.transition
         x = x.view(self.n, w, *x.shape[1:]).clone()
+        known = self.known.view(self.n, w, -1).to(x.dtype)
         for k in range(1, w):
             end = self.windows[k - 1].known + self.windows[k - 1].keep
-            mean = 0.5 * (x[:, k - 1, end - o : end] + x[:, k, :o])
-            x[:, k - 1, end - o : end], x[:, k, :o] = mean, mean
+            before, after = known[:, k - 1, end - o : end], known[:, k, :o]
+            # the earlier copy's weight: 1/2, or 1 (0) where only it (the other) is
+            # anchored
+            weight = (0.5 * (1 + before - after))[:, :, None, None]
+            shared = weight * x[:, k - 1, end - o : end] + (1 - weight) * x[:, k, :o]
+            x[:, k - 1, end - o : end], x[:, k, :o] = shared, shared
         return x.view(-1, *x.shape[2:])
 
 
@@ -565,7 +585,7 @@ def _handshake(face, schedule, n, settings, denoiser, guides, progress):
         known_noise(settings.seed),
         inner=chain(*hooks, reconstruction),
     )
-    hook = Handshake(anchors, windows, n, o)
+    hook = Handshake(anchors, windows, n, o, known)
     generator = torch.Generator().manual_seed(settings.seed)
     start = anchors.start(generator)
     x = diffusion.run(denoiser.model, start, generator, None, hook, progress=progress)
@@ -590,8 +610,8 @@ def long_sequence(
     **overrides,
 ):
     """n long sequences (n, frames, 68, 3) float32 in mm at ``settings.fps`` of the face
-    ``neutral`` following ``schedule`` (:func:`stream`, or the handshake), resampled in
-    time from :data:`NATIVE_FPS`."""
+    ``neutral`` (None: :func:`drawn_face` of the seed) following ``schedule``
+    (:func:`stream`, or the handshake), resampled in time from :data:`NATIVE_FPS`."""
     settings, face = _check(neutral, schedule, n, settings, overrides)
     if settings.join == "handshake":
         x = _handshake(

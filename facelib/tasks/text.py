@@ -155,9 +155,10 @@ def text_control(
             callback=callback,
         )
     else:
-        select = max(
-            1, int(np.argmin(np.abs(diffusion.timesteps - settings.select_time)))
-        )
+        # the chain's step nearest select_time, below its first (BestOfK picks
+        # between chains that have run at least one step)
+        nearest = int(np.argmin(np.abs(diffusion.timesteps - settings.select_time)))
+        select = min(max(1, nearest), diffusion.num_steps - 1)
         x = BestOfK(score, settings.particles, select).sample(
             diffusion, denoiser.model, shape, hook, settings.seed, progress
         )

@@ -405,6 +405,7 @@ class DistillationRecipe(Recipe):
                 " of one), not a rectified flow"
             )
         recorded = self.teacher.meta["training"]
+        self._check_teacher_grid(recorded.get("sampler_steps"))
         # the teacher's data as the teacher saw it (a student records its DDPM's)
         self.data = DenoiserRecipe(
             config.DenoiserTraining(
@@ -430,6 +431,23 @@ class DistillationRecipe(Recipe):
             halving_steps(settings.teacher_steps, t.num_diffusion_steps)
         )
         self.alphas_bar = torch.as_tensor(self.data.diffusion.alphas_bar)
+
+    def _check_teacher_grid(self, sampler_steps):
+        """A student teacher was distilled for its own steps only: the chain this round
+        halves (halving_steps(teacher_steps)) must be that chain, or the student would
+        learn from steps its teacher never took (and be saved under the name of
+        another round's student)."""
+        if sampler_steps is None:
+            return
+        t = self.teacher.model.config.num_diffusion_steps
+        grid = halving_steps(self.settings.teacher_steps, t)[1:].tolist()
+        if list(sampler_steps) != grid:
+            raise ValueError(
+                f"{self.settings.teacher} is a student of {len(sampler_steps)}"
+                f" deterministic steps ({list(sampler_steps)[:3]}...): distil it with"
+                f" teacher_steps={len(sampler_steps)}, not"
+                f" {self.settings.teacher_steps}, whose chain it was not distilled for"
+            )
 
     def _guidance_scale(self, teacher, recorded):
         """The classifier-free weight w the students of a label-conditional teacher
