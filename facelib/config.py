@@ -903,21 +903,21 @@ AU_CURVE_TOLERANCE = 0.1
 # the Adagrad rate of AU-curve control at 50 steps (our choice; the fine-control
 # chapter)
 AU_CURVE_LR = 0.03
-# our choice: AU-curve control is scored on the AUs that the rig fit recovers
+# our choice: AU-curve control is scored on the AUs that the rig fit recovers within
+# this (mean absolute error, intensity units) on real test sequences
+# (experiments.fit_floor), no others
 AU_MEASURABLE_FIT_ERROR = 0.05
-# within this (mean absolute error, intensity units) on real test sequences
-# (experiments.fit_floor), no others our choice: a sequence activates an AU when its
-# |intensity| exceeds this at some frame
-AU_ACTIVE = 0.2
+# our choice: a sequence activates an AU when its |intensity| exceeds this at some frame
 # (tasks.au.active_aus, tasks.never_together): a clear activation (a fifth of a typical
-# strong apex), not a trace our choice: a random request's peak lies in [low, min(high,
-# the data's highest)]
-AU_REQUEST_PEAK = (0.3, 1.0)
+# strong apex), not a trace
+AU_ACTIVE = 0.2
+# our choice: a random request's peak lies in [low, min(high, the data's highest)]
 # (experiments.random_requests): strong enough for the rig fit to see, never beyond a
-# typical strong apex (1) our choice: the frames (inclusive) where a random request
-# peaks, so the
+# typical strong apex (1)
+AU_REQUEST_PEAK = (0.3, 1.0)
+# our choice: the frames (inclusive) where a random request peaks, so the curve rises
+# over at least 10 frames and falls over at least 14 of the 40
 AU_REQUEST_PEAK_FRAMES = (10, 25)
-# curve rises over at least 10 frames and falls over at least 14 of the 40
 
 
 @dataclass(frozen=True)
@@ -1271,18 +1271,6 @@ class Registration:
 
     def fast(self):
         return replace(self, samples=20_000, rigid_iterations=15)
-
-
-SAMPLING = {
-    "unconditional": Unconditional(),
-    "label": LabelControl(),
-    "text": TextControl(),
-    "fill": Fill(),
-    "geometry": GeometryAdaptive(),
-    "edit": Edit(),
-    "au": AUControl(),
-    "keyframes": Keyframes(),
-}
 
 
 def with_overrides(settings, overrides):

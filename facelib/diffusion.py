@@ -41,7 +41,7 @@ import itertools
 
 import numpy as np
 import torch
-from tqdm import tqdm
+from tqdm.auto import tqdm
 
 from .config import check_prediction
 
