@@ -203,8 +203,8 @@ def test_an_anchor_inside_a_shared_block_holds_at_every_step_of_the_handshake():
 # -- small edges -----------------------------------------------------------------------------------------------
 
 def test_best_of_k_text_control_selects_below_the_chains_first_step(text_head, merged_denoiser):
-    """A select_time at or above the chain's first time label picked select == num_steps, which BestOfK
-    refuses."""
+    """A select_time nearest the chain's first time label (T here) picked select == num_steps, which BestOfK
+    refuses; one beyond the chain is refused by the task (tests/test_tasks_text.py)."""
     x = tasks.text_control("a broad grin", 1, steps=3, particles=2, select_time=float(T), denoiser=merged_denoiser,
                            head=text_head, progress=False)
     assert x.shape == (1, 40, 68, 3) and np.isfinite(x).all()

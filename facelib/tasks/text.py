@@ -155,6 +155,12 @@ def text_control(
             callback=callback,
         )
     else:
+        first = float(diffusion.timesteps[-1])
+        if settings.select_time > first:
+            raise ValueError(
+                f"select_time {settings.select_time:g} is above the chain's first step"
+                f" (time label {first:g}): give a time label in 1..{first:g}"
+            )
         # the chain's step nearest select_time, below its first (BestOfK picks
         # between chains that have run at least one step)
         nearest = int(np.argmin(np.abs(diffusion.timesteps - settings.select_time)))
