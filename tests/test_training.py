@@ -14,6 +14,7 @@ from facelib import config, training
 from facelib.__main__ import main
 from facelib.training import Draws, swap_anatomy, training_anatomies
 from facelib.training.loop import Objective, TrainingLog, device_for, learning_rate
+from facelib.training.recipes import Recipe
 
 
 def _recipe(steps=6, **settings):
@@ -168,6 +169,47 @@ def test_a_kill_while_the_state_is_written_leaves_the_previous_state_intact(tmp_
     assert torch.load(tmp_path / "run.state.pt", weights_only=False)["step"] == 2
     resumed, history = training.fit(_recipe(6), progress=False, resume_from=tmp_path / "run", save_every=2)
     assert _same(whole.state_dict(), resumed.state_dict()) and history["step"][-1] == 6
+
+
+class _BatchNormRecipe(Recipe):
+    """A linear layer and a BatchNorm, whose running mean (a buffer) moves in training."""
+
+    size = 64
+
+    def __init__(self, steps=6):
+        self.settings = config.Optimisation(steps=steps, batch_size=8, ema_decay=0.9)
+        self.x = torch.randn(self.size, 3, generator=torch.Generator().manual_seed(0)) + 5
+
+    def build(self, generator):
+        return torch.nn.Sequential(torch.nn.Linear(3, 3), torch.nn.BatchNorm1d(3))
+
+    def model_config(self, model):
+        return {}
+
+    def objectives(self, model):
+        self.trained = model  # the weights the EMA follows
+        return super().objectives(model)
+
+    def loss(self, model, draws):
+        return model(self.x[draws.examples(self.size)]).pow(2).mean(), {}
+
+
+def test_the_ema_carries_the_models_buffers_and_resumes_bit_for_bit(tmp_path):
+    """Before, the EMA averaged the parameters only: its BatchNorm kept the running
+    mean 0 and count 0 it was copied with."""
+    recipe = _BatchNormRecipe()
+    ema, _ = training.fit(recipe, progress=False)
+    bn, trained = ema[1], recipe.trained[1]
+    assert int(bn.num_batches_tracked) == 6 and bn.running_mean.abs().min() > 0.1
+    assert torch.equal(bn.running_mean, trained.running_mean)
+    assert torch.equal(bn.running_var, trained.running_var)
+    assert not torch.equal(ema[0].weight, recipe.trained[0].weight)  # weights averaged
+    assert list(ema.state_dict()) == list(recipe.trained.state_dict())  # same keys
+    with pytest.raises(KeyboardInterrupt):
+        training.fit(_dies_in_step(_BatchNormRecipe(), 4), progress=False, resume_from=tmp_path / "run",
+                     save_every=3)
+    resumed, _ = training.fit(_BatchNormRecipe(), progress=False, resume_from=tmp_path / "run", save_every=3)
+    assert _same(ema.state_dict(), resumed.state_dict())
 
 
 def test_a_resume_with_other_settings_is_refused_with_what_differs(tmp_path):

@@ -3,10 +3,10 @@ loss) run by :func:`fit`.
 
 What the loop owns, once for every model: the seed, the optimiser (Adam or AdamW),
 linear warm-up then cosine decay of the learning rate, gradient-norm clipping, an
-exponential moving average (EMA) of the weights, the loss curves (:class:`TrainingLog`),
-resuming an interrupted run, and distributed data parallel training.  What a recipe owns
-(facelib/training/recipes.py): its data, how to build the model and the loss of one
-batch.
+exponential moving average (EMA) of the weights (which copies the model's buffers),
+the loss curves (:class:`TrainingLog`), resuming an interrupted run, and distributed
+data parallel training.  What a recipe owns (facelib/training/recipes.py): its data,
+how to build the model and the loss of one batch.
 
 Distributed training.  Under ``torchrun --nproc_per_node N -m facelib train ...`` every
 process runs this same loop on its own shard of each batch, wrapped in PyTorch's
@@ -38,7 +38,7 @@ from typing import Callable
 
 import numpy as np
 import torch
-from tqdm import tqdm
+from tqdm.auto import tqdm
 
 from ..config import Optimisation
 
@@ -288,7 +288,8 @@ def fit(
     """Train ``recipe``'s model with its settings; returns (model, history) on every
     process.
 
-    The model returned is the EMA of the weights when the settings keep one.  A recipe
+    The model returned is the EMA of the weights when the settings keep one, with the
+    model's buffers (BatchNorm statistics, counters) copied at every step.  A recipe
     with a ``validate(model) -> {name: value}`` method (the denoiser's held-out losses
     per noise level) has it called on the model that would be returned every
     ``validate_every`` steps and at the last; the values go to ``history["held_out"]``
@@ -402,6 +403,9 @@ def _fit(recipe, dist, progress, log_every, resume_from, save_every, validate_ev
                 decay = min(settings.ema_decay, (1 + step) / (10 + step))
                 for pe, pm in zip(ema.parameters(), model.parameters()):
                     pe.lerp_(pm, 1 - decay)
+                # buffers (running statistics, counters) are copied, not averaged
+                for be, bm in zip(ema.buffers(), model.buffers()):
+                    be.copy_(bm)
         log.add(step, **_mean_over_processes(values, dist))
         if hasattr(recipe, "validate") and (
             (step + 1) % validate_every == 0 or step + 1 == total
