@@ -27,7 +27,7 @@ import time
 
 import numpy as np
 
-from facelib import config, data, evaluation, metrics, pipeline, results
+from facelib import data, evaluation, metrics, pipeline, results, tasks
 from facelib.face import Face, sample_identity
 from facelib.face.template import get_template
 
@@ -151,7 +151,7 @@ def main():
                 ],
                 seeds=list(range(args.faces * args.seeds)),
                 n=args.faces * args.seeds,
-                steps=[args.steps or config.GeometryAdaptive().steps],
+                steps=[args.steps or tasks.GeometryAdaptive().steps],
                 wall_time_s=time.perf_counter() - t_start,
             ),
             notes=(

@@ -4,7 +4,7 @@ its budget and scored.
 Usage: python benchmarks/baseline_sweep.py [--budget 0.25] [--per-label 20] [--only 0 3]
 [--save NAME]
 
-Each candidate (``CANDIDATES``: the recipe's defaults, facelib/config.py, with some
+Each candidate (``CANDIDATES``: the recipe's defaults, facelib/training/settings.py, with some
 settings changed) is trained on the coma training split for ``--budget`` times its
 recipe's steps, then generates ``--per-label`` sequences of every label.  The type-I IC
 scores them: accuracy and FID with 95 % bootstrap intervals, diversity, and "motion",
@@ -14,7 +14,7 @@ with ``--save`` the stored table is rewritten after every candidate, replacing j
 rows this run measured.
 
 The rule that picks a setting is the book's (chapter 06): the best accuracy - 2 FID.
-The picks go into config.ActorTraining and config.Motion3DGANTraining and are then
+The picks go into training.ActorTraining and training.Motion3DGANTraining and are then
 trained at the full budget:
 
     python benchmarks/baseline_sweep.py --save baseline_sweep

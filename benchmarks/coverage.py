@@ -28,7 +28,7 @@ import time
 
 import numpy as np
 
-from facelib import config, data, evaluation, metrics, results, tasks
+from facelib import data, evaluation, metrics, results, tasks
 
 REGIONS = metrics.AMPLITUDE_REGIONS
 COLUMNS = (
@@ -78,7 +78,7 @@ def main():
         "--steps",
         type=int,
         nargs="+",
-        default=[config.Unconditional().steps],
+        default=[tasks.Unconditional().steps],
         help="respaced reverse steps, one row each (default: the command line's)",
     )
     results.add_save_options(parser)
@@ -134,7 +134,7 @@ def main():
             rows,
             results.Run(
                 allow_dirty=args.allow_dirty,
-                settings=(config.Unconditional(),),
+                settings=(tasks.Unconditional(),),
                 checkpoints=[f"denoiser_{args.dataset}", f"ic_{args.dataset}_I"],
                 seeds=[0],
                 n=args.n,

@@ -5,7 +5,7 @@ Usage: python benchmarks/denoiser_ablation.py [--dataset coma] [--steps 3000] [-
 NAME ...] [--train-only]
                                               [--sample-steps 500] [--n N] [--save NAME]
 
-Each row trains the shipped denoiser's recipe (facelib/config.py, DenoiserTraining) with
+Each row trains the shipped denoiser's recipe (facelib/training/settings.py, DenoiserTraining) with
 one change, at a reduced budget (``--steps``), into the cache
 (``<cache>/denoiser_ablation/NAME``; a finished run is reused, a stopped one resumed),
 then measures its unconditional samples (``--n``, default the test split's size, at the
@@ -136,7 +136,7 @@ def main():
     parser.add_argument(
         "--sample-steps",
         type=int,
-        default=config.Unconditional().steps,
+        default=tasks.Unconditional().steps,
         help="respaced reverse steps of the samples (default: the command line's)",
     )
     parser.add_argument(
@@ -212,7 +212,7 @@ def main():
     if args.save:
         run = results.Run(
             allow_dirty=args.allow_dirty,
-            settings=(config.DenoiserTraining(), config.Unconditional()),
+            settings=(training.DenoiserTraining(), tasks.Unconditional()),
             checkpoints=[f"ic_{args.dataset}_I"],
             seeds=[0],
             n=n,

@@ -259,7 +259,7 @@ def edit_experiment(args, ev):
         back = den.to_mm(
             chain.run(
                 den.model,
-                tasks.invert(den, x, config.Edit(refine=refine)),
+                tasks.invert(den, x, tasks.Edit(refine=refine)),
                 progress=False,
             )
         )
@@ -485,7 +485,7 @@ def main():
             notes=(
                 f"intervals: 95 % bootstrap over the sequences (Evaluator.score); FID"
                 f" against the training split from n sequences; DDIM at eta = 0; label"
-                f" control with the book's defaults (config.LabelControl); steps with"
+                f" control with the book's defaults (tasks.LabelControl); steps with"
                 f" --tasks, edit with --edit-runs: the other rows are those of earlier"
                 f" runs (the commit, date and wall time above are the last run's;"
                 f" row_provenance names each row's run)"

@@ -33,13 +33,12 @@ with a 95 % bootstrap interval (--task-n sequences per row; --save few_steps_tas
 import argparse
 import gc
 import multiprocessing
-import os
 import time
 
 import numpy as np
 import torch
 
-from facelib import config, data, evaluation, metrics, results, tasks
+from facelib import data, evaluation, metrics, results, tasks
 from facelib.flow import RectifiedFlow
 
 BATCH = 64
@@ -419,13 +418,13 @@ def main():
             n=args.n if steps_run else args.task_n,
             steps=STEPS if steps_run else [4, 16, 50],
             wall_time_s=time.perf_counter() - t0,
-            settings=[config.LabelControl(), config.Fill(), config.GeometryAdaptive()]
-            + [config.Keyframes()],
+            settings=[tasks.LabelControl(), tasks.Fill(), tasks.GeometryAdaptive()]
+            + [tasks.Keyframes()],
         ),
         notes=(
             f"unconditional: n = {args.n} in batches of {BATCH}, one thread, each row"
             f" in a fresh process; guided: n = {args.guided_n}, the labels in equal"
-            " numbers, config.LabelControl's defaults for the sampler; intervals: 95 %"
+            " numbers, tasks.LabelControl's defaults for the sampler; intervals: 95 %"
             " bootstrap over the sequences; FID against the training split; speed: the"
             " mean frame-to-frame speed over the test split's; DDPM and DDIM on"
             " trailing steps unless 'uniform'"

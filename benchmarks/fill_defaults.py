@@ -1,4 +1,4 @@
-"""The default of ``python -m facelib sample fill`` (config.Fill): seams, accuracy and
+"""The default of ``python -m facelib sample fill`` (tasks.Fill): seams, accuracy and
 FID of candidate settings.
 
 Usage: python benchmarks/fill_defaults.py [--n 64] [--known 0:10,30:40] [--only TEXT]
@@ -14,7 +14,7 @@ the median speed inside the generated span (the data's own includes capture nois
 type-I IC accuracy and FID with 95 % bootstrap intervals, and the seconds.  The real
 sequences are the first row.
 
-``--save NAME`` stores the table in results/NAME.json; config.Fill cites
+``--save NAME`` stores the table in results/NAME.json; tasks.Fill cites
 ``results/fill_defaults.json``:
 
     python benchmarks/fill_defaults.py --save fill_defaults
@@ -28,7 +28,7 @@ import time
 import numpy as np
 import torch
 
-from facelib import config, data, evaluation, inpainting, metrics, results, tasks
+from facelib import data, evaluation, inpainting, metrics, results, tasks
 
 COLUMNS = [
     "method",
@@ -137,7 +137,7 @@ def main():
         x = tasks.fill(
             truth,
             known,
-            config.Fill().paper(),
+            tasks.Fill().paper(),
             denoiser=denoiser,
             progress=False,
             **settings,

@@ -43,7 +43,7 @@ from facelib import (
 )
 
 ALG3 = (
-    config.Fill().paper()
+    tasks.Fill().paper()
 )  # Alg. 3 as printed; its rows add RePaint or reconstruction guidance explicitly
 
 COLUMNS = [

@@ -60,9 +60,9 @@ FLOOR = (
     config.AU_MEASURABLE_FIT_ERROR
 )  # AUs whose rig fit on real sequences errs by more cannot be scored at 0.1
 MEASURED = {
-    "au": (config.AUControl(),),
+    "au": (tasks.AUControl(),),
     "floor": (),
-    "keyframes": (config.Keyframes(),),
+    "keyframes": (tasks.Keyframes(),),
 }  # the defaults measured
 # test sequences the rig fit's error is measured on (experiments.fit_floor's default)
 FLOOR_SEQUENCES = 30
@@ -398,7 +398,7 @@ def main():
     args = parser.parse_args()
     results.check_save_args(args)  # before any compute
     default = (
-        config.Keyframes() if args.experiment == "keyframes" else config.AUControl()
+        tasks.Keyframes() if args.experiment == "keyframes" else tasks.AUControl()
     )
     args.steps = args.steps or default.steps
     steps = (

@@ -146,7 +146,7 @@ def main():
             rows=table,
             run=results.Run(
                 allow_dirty=args.allow_dirty,
-                settings=(config.GeometryAdaptive(),),
+                settings=(tasks.GeometryAdaptive(),),
                 checkpoints=["denoiser_coma", "guide_coma_S", "ic_coma_S"],
                 seeds=[0],
                 n=len(rows_sel),

@@ -4,7 +4,7 @@ how far the faces move.
 Usage: python benchmarks/geometry_lr.py [--per-class 2] [--lr 0.01 0.03 0.1] [--save
 NAME]
 
-Alg. 4 with the book's settings (config.GeometryAdaptive: one pass, reconstruction
+Alg. 4 with the book's settings (tasks.GeometryAdaptive: one pass, reconstruction
 guidance) regenerates ``--per-class`` coma test sequences of every type-S class from
 their own neutral frames, at each rate.  The type-S IC scores them (accuracy and FID
 with 95 % bootstrap intervals); "motion" is the mean over sequences of the largest
@@ -22,7 +22,7 @@ import time
 
 import numpy as np
 
-from facelib import config, data, evaluation, experiments, results, tasks
+from facelib import data, evaluation, experiments, results, tasks
 
 COLUMNS = [
     "rate",
@@ -108,7 +108,7 @@ def main():
                 checkpoints=["denoiser_coma", "guide_coma_S", "ic_coma_S"],
                 seeds=[0],
                 n=len(rows_sel),
-                steps=[config.GeometryAdaptive().steps],
+                steps=[tasks.GeometryAdaptive().steps],
                 wall_time_s=time.perf_counter() - t_start,
             ),
             notes=(

@@ -19,7 +19,7 @@ table1: chapter 05's Table 1 on the whole test split (or its first --n sequences
 the two
     baselines, the unguided DDPM, mean shift (--mean-shift-scale) and Alg. 1, with
     intervals.
-per_label: the command line's label control (config.LabelControl: its steps, guidance
+per_label: the command line's label control (tasks.LabelControl: its steps, guidance
 and rate), n
     sequences per label, against the test split's sequences of that label, both read by
     the IC: accuracy per label with 95 % intervals (does guidance reach every label, the
@@ -186,7 +186,7 @@ def table1_experiment(args, name, ev, guide, denoiser):
 
 
 def per_label_experiment(args, name, ev, guide, denoiser):
-    settings = config.LabelControl(dataset=name)
+    settings = tasks.LabelControl(dataset=name)
     test = data.load_dataset(name, "test")
     test_targets = test.targets("I")
     rows = []
@@ -256,7 +256,7 @@ def main():
         default=None,
         help=(
             "reverse steps (steps: 2000 500 200 100; sweep and table1: one value, 200; "
-            "per_label: the command line's, config.LabelControl)"
+            "per_label: the command line's, tasks.LabelControl)"
         ),
     )
     parser.add_argument(
@@ -277,12 +277,12 @@ def main():
     if args.experiment == "per_label" and args.steps is not None:
         parser.error(
             "--experiment per_label runs the command line's steps"
-            " (config.LabelControl); drop --steps"
+            " (tasks.LabelControl); drop --steps"
         )
     if args.steps is None:
         args.steps = {
             "steps": [2000, 500, 200, 100],
-            "per_label": [config.LabelControl().steps],
+            "per_label": [tasks.LabelControl().steps],
         }.get(args.experiment, [200])
     elif args.experiment != "steps" and len(args.steps) != 1:
         parser.error(
@@ -348,7 +348,7 @@ def main():
                 steps=args.steps,
                 wall_time_s=time.perf_counter() - t0,
                 settings=(
-                    (config.LabelControl(),) if args.experiment == "per_label" else ()
+                    (tasks.LabelControl(),) if args.experiment == "per_label" else ()
                 ),
             ),
             notes=(

@@ -21,7 +21,7 @@ frames made per second (one thread).
 --stream free: the same streams without a schedule (free motion of the same length):
 most of the schedule's joins fall where a segment begins, and the face moves
 differently there with or without a join; a free stream's joins are only joins.
---feather: rows of fill with feathered replacement (config.Long.feather).
+--feather: rows of fill with feathered replacement (tasks.Long.feather).
 --learned-alone: a row of join "learned" (the join denoiser) without reconstruction
 guidance.
 
@@ -31,7 +31,7 @@ neutral:1s", in a shuffled order (54 s); the IC accuracy of each text segment is
 by the coma+bu type-I IC (compare text control of single sequences,
 results/text_table2_raw.json); join fill only, unless --joins says;
 --type-i-opening adds a row whose segments open with the text said in order ("from the
-neutral face to ...", config.Long.text_opening), --text-lr rows of other Adagrad rates
+neutral face to ...", tasks.Long.text_opening), --text-lr rows of other Adagrad rates
 (default: text control's).
 
 --experiment length: one stream of the first test face follows "LABEL:2s, neutral:1s"
@@ -145,7 +145,7 @@ def segment_windows(x, schedule, windows, num_frames, label_of=None):
 
 
 def joins_experiment(args):
-    settings = config.Long()
+    settings = tasks.Long()
     texts = args.stream == "text"
     dataset = settings.text_dataset if texts else settings.dataset
     test = data.load_dataset(dataset, "test")
@@ -269,7 +269,7 @@ def length_experiment(args):
     test = data.load_dataset("coma", "test")
     face = test.neutral_landmarks(int(np.unique(test.subjects)[0]))
     guide = tasks.load_guide("coma", "I")
-    settings = config.Long()
+    settings = tasks.Long()
     one = label_schedule(guide.class_names)
     cycle = long.parse_schedule(one, guide.class_names)
     cycle_seconds = sum(s.frames for s in cycle) / long.NATIVE_FPS
@@ -354,7 +354,7 @@ def main():
         type=float,
         nargs="*",
         default=[],
-        help="joins: also rows of fill with these feathers (frames; config.Long)",
+        help="joins: also rows of fill with these feathers (frames; tasks.Long)",
     )
     p.add_argument(
         "--learned-alone",
@@ -366,7 +366,7 @@ def main():
         type=float,
         nargs="*",
         default=[],
-        help="--stream text: also rows of these Adagrad rates (config.Long.text_lr)",
+        help="--stream text: also rows of these Adagrad rates (tasks.Long.text_lr)",
     )
     p.add_argument("--minutes", type=float, nargs="+", default=[1, 10])
     p.add_argument("--save", default=None)

@@ -14,7 +14,7 @@ measured against their truth:
   the rigid and the identity-model stages;
 * apex error (mm): the true motion of each template vertex for high_smile, mouth_open
   and eyebrow (at the middle of each recipe's ranges) is carried to the scan's vertices
-  by Registration.transfer and compared with the true motion of those vertices (the
+  by FittedTemplate.transfer and compared with the true motion of those vertices (the
   face's vertices; extra components excluded): mean over vertices, then mean and 95 %
   bootstrap interval over faces and labels;
 * seconds per registration (mean) and the rigid residual (trimmed RMS, mm) that decides
@@ -168,7 +168,7 @@ def main():
     args = parser.parse_args()
     results.check_save_args(args)  # before any compute
     t_start = time.perf_counter()
-    settings = config.Registration()
+    settings = registration.Registration()
     rows = []
     for case, kwargs in CASES.items():
         rows.append(face_row(case, kwargs, args.faces, settings))

@@ -4,8 +4,9 @@ Expression Diffusion Model (Zou et al. 2023) on a synthetic face world.
 The map of the package, bottom to top.  A module imports only from the layers below it
 (tests/test_layout.py checks every import):
 
-0. ``config``: every default: datasets, training recipes, sampling tasks (paper value
-   or our choice).
+0. ``config``: paths, the world, the datasets, and the constants several modules read
+   (paper value or our choice).  ``checks``: the checks every setting shares (a
+   choice, a number, an integer, a probability).  ``files``: the atomic write.
 1. ``face``: the synthetic face world: template, identities, action units,
    expressions, sequences.  ``metrics``: accuracy, FID, diversity, seams, bootstrap
    intervals.  ``srvf``: square-root velocity.  ``chapters``: run one chapter notebook
@@ -23,19 +24,19 @@ The map of the package, bottom to top.  A module imports only from the layers be
    flow on the DDPM's path (its loss, Euler and Heun).
 4. ``guidance``: sampler hooks: Adagrad optimisation (Alg. 1-2), mean shift,
    reconstruction guidance.  ``inpainting``: known frames (Alg. 3).  ``rig_fit``: the
-   rig fitted to landmarks.  ``toy``: a 2-D DDPM.  ``results``: stored full-scale
-   results with their provenance.
+   rig fitted to landmarks.  ``toy``: a 2-D DDPM.
 5. ``baselines``: the related papers' models.  ``deformation``: §3.3 mesh deformation.
    ``evaluation``: the independent classifier and its scores.
 6. ``tasks``: unconditional, label (Alg. 1), text (Alg. 2), fill (Alg. 3), geometry
-   (Alg. 4).  ``text_eval``: measurements of text control: what the head reads,
-   compositions, order and label.
+   (Alg. 4), and each task's settings (tasks/settings.py).  ``text_eval``:
+   measurements of text control: what the head reads, compositions, order and label.
 7. ``pipeline``: neutral mesh -> animated meshes.  ``training``: one loop, one recipe
-   per model.  ``experiments``: the inputs the tables and benchmarks measure the tasks
-   on (Table 1's rows, Table 4's inputs, random AU requests and keyframes, the rig
-   fit's floor).
+   per model, each recipe's settings (training/settings.py).  ``experiments``: the
+   inputs the tables and benchmarks measure the tasks on (Table 1's rows, Table 4's
+   inputs, random AU requests and keyframes, the rig fit's floor).
 8. ``cli_sample``: the command line's ``sample TASK`` (a subcommand per task, options
-   from config).
+   from the tasks' settings).  ``results``: stored full-scale results with their
+   provenance (the settings they measured, whichever layer holds them).
 9. ``__main__``: the command line: ``python -m facelib
    data|train|sample TASK|neutral|animate|register|chapter|results``.
 
@@ -47,6 +48,8 @@ tasks.label_control("high_smile")``.
 # each import against it.
 LAYERS = {
     "config": 0,
+    "checks": 0,
+    "files": 0,
     "face": 1,
     "metrics": 1,
     "srvf": 1,
@@ -67,7 +70,6 @@ LAYERS = {
     "inpainting": 4,
     "rig_fit": 4,
     "toy": 4,
-    "results": 4,
     "baselines": 5,
     "deformation": 5,
     "evaluation": 5,
@@ -77,12 +79,14 @@ LAYERS = {
     "experiments": 7,
     "training": 7,
     "cli_sample": 8,
+    "results": 8,
     "__main__": 9,
 }
 __all__ = [
     "baselines",
     "chapters",
     "checkpoints",
+    "checks",
     "cli_sample",
     "config",
     "data",
@@ -92,6 +96,7 @@ __all__ = [
     "diffusion",
     "evaluation",
     "face",
+    "files",
     "flow",
     "guidance",
     "inpainting",

@@ -121,13 +121,15 @@ def _train(args):
                 "--set changes one recipe's settings; train all trains the shipped ones"
                 " as they are"
             )
-        training.train_all(
+        rows = training.train_all(
             args.only,
             fast=args.fast,
             out_dir=args.out,
             missing=args.missing,
             resume=args.resume,
         )
+        if args.out is None and not args.fast and rows:
+            results.store_training_times()  # results/train_all.json
         return 0
     given = {
         "dataset": args.dataset,
@@ -174,18 +176,18 @@ def _neutral(args):
 
 
 def _registration_settings(args):
-    """config.Registration with --units and every --set NAME=VALUE of `register` and
-    `animate`."""
+    """registration.Registration with --units and every --set NAME=VALUE of `register`
+    and `animate`."""
     given = {}
     for assignment in args.set:
-        name, value = _setting("registration", assignment, config.Registration)
+        name, value = _setting("registration", assignment, registration.Registration)
         if name in given or name == "units":
             raise ValueError(
                 f"--set {name} repeats a setting given by its own option (--units) or"
                 " an earlier --set"
             )
         given[name] = value
-    return dataclasses.replace(config.Registration(), units=args.units, **given)
+    return dataclasses.replace(registration.Registration(), units=args.units, **given)
 
 
 # `animate --schedule`'s GIF: every k-th frame, at most this rate (GIF frame times are
@@ -210,10 +212,10 @@ def _animation_request(args):
                 "--fps is the frame rate of a --schedule; a --label clip is"
                 f" {config.NUM_FRAMES} frames"
             )
-        settings = config.GeometryAdaptive()
+        settings = tasks.GeometryAdaptive()
         what = dict(
             label=args.label,
-            order=args.order,  # None: config.GeometryAdaptive's (N2E for a label)
+            order=args.order,  # None: tasks.GeometryAdaptive's (N2E for a label)
             steps=settings.steps if steps is None else steps,
             sampler="student" if args.fast else settings.sampler,
         )
@@ -221,9 +223,9 @@ def _animation_request(args):
     if args.fast or args.order is not None:
         raise ValueError(
             "--fast and --order apply to a --label clip; a --schedule streams with the"
-            " chain of config.Long and opens every segment from the rest"
+            " chain of tasks.Long and opens every segment from the rest"
         )
-    settings = config.Long()
+    settings = tasks.Long()
     settings = dataclasses.replace(
         settings,
         fps=settings.fps if args.fps is None else args.fps,
@@ -392,7 +394,10 @@ def _results(args):
     return 1 if any(e["problems"] for e in entries) else 0
 
 
-def main(argv=None):
+def build_parser():
+    """The command line's parser: a subcommand per command, each option with its help
+    and default (``sample TASK``'s generated from the task's settings,
+    cli_sample.add_parsers)."""
     parser = argparse.ArgumentParser(prog="python -m facelib", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser(
@@ -477,7 +482,7 @@ def main(argv=None):
         "--steps",
         type=int,
         default=None,
-        help="training steps (default: the recipe's, facelib/config.py)",
+        help="training steps (default: the recipe's, facelib/training/settings.py)",
     )
     p.add_argument(
         "--batch-size",
@@ -510,7 +515,7 @@ def main(argv=None):
         action="store_true",
         help=(
             "denoiser: label-conditional, for classifier-free guidance (labels dropped"
-            " with probability config.DenoiserTraining.condition_dropout; checkpoint"
+            " with probability training.DenoiserTraining.condition_dropout; checkpoint"
             " denoiser_<dataset>_cfg)"
         ),
     )
@@ -520,9 +525,9 @@ def main(argv=None):
         default=[],
         metavar="NAME=VALUE",
         help=(
-            "any other setting of the recipe (facelib/config.py; repeatable), e.g."
-            " denoiser: --set prediction=v --set min_snr_gamma=5 --set mirror=0.5 --set"
-            " schedule=cosine; 'none' for None"
+            "any other setting of the recipe (facelib/training/settings.py;"
+            " repeatable), e.g. denoiser: --set prediction=v --set min_snr_gamma=5"
+            " --set mirror=0.5 --set schedule=cosine; 'none' for None"
         ),
     )
     p.add_argument(
@@ -602,8 +607,8 @@ def main(argv=None):
         default=[],
         metavar="NAME=VALUE",
         help=(
-            "any setting of the registration (config.Registration; repeatable), e.g."
-            " --set samples=20000 --set max_residual_mm=4"
+            "any setting of the registration (registration.Registration; repeatable),"
+            " e.g. --set samples=20000 --set max_residual_mm=4"
         ),
     )
     p.add_argument(
@@ -628,8 +633,8 @@ def main(argv=None):
         type=int,
         default=None,
         help=(
-            "frames per second of a --schedule's OBJ frames (default: config.Long,"
-            f" {config.Long().fps}; {config.LONG_FPS_RANGE[0]}.."
+            "frames per second of a --schedule's OBJ frames (default: tasks.Long,"
+            f" {tasks.Long().fps}; {config.LONG_FPS_RANGE[0]}.."
             f"{config.LONG_FPS_RANGE[1]})"
         ),
     )
@@ -645,7 +650,7 @@ def main(argv=None):
         default=None,
         help=(
             "reverse steps per pass of Alg. 4, or per window of a --schedule (default:"
-            " config.GeometryAdaptive, config.Long: 100, the book's respaced chain)"
+            " tasks.GeometryAdaptive, tasks.Long: 100, the book's respaced chain)"
         ),
     )
     p.add_argument(
@@ -693,8 +698,8 @@ def main(argv=None):
         default=[],
         metavar="NAME=VALUE",
         help=(
-            "any setting of the registration (config.Registration; repeatable), e.g."
-            " --set samples=20000 --set max_residual_mm=4"
+            "any setting of the registration (registration.Registration; repeatable),"
+            " e.g. --set samples=20000 --set max_residual_mm=4"
         ),
     )
     p.set_defaults(func=_register)
@@ -727,6 +732,11 @@ def main(argv=None):
         ),
     )
     p.set_defaults(func=_results)
+    return parser
+
+
+def main(argv=None):
+    parser = build_parser()
     args = parser.parse_args(argv)
     try:
         return args.func(args)

@@ -20,6 +20,7 @@ from pathlib import Path
 import torch
 
 from . import config
+from .files import atomic_write, atomic_write_text
 
 
 def _sha256(path):
@@ -198,8 +199,8 @@ def save_checkpoint(name, model, kind, model_config, **metadata):
     """Write ``name``.pt (state_dict) and ``name``.json (kind, config, sha256, world:
     with the fingerprints of the datasets it read (:func:`datasets_read`), metadata)."""
     pt, js = checkpoint_paths(name)
-    pt.parent.mkdir(parents=True, exist_ok=True)
-    torch.save({k: v.detach().cpu() for k, v in model.state_dict().items()}, pt)
+    state = {k: v.detach().cpu() for k, v in model.state_dict().items()}
+    atomic_write(pt, lambda f: torch.save(state, f))
     read = datasets_read({"kind": kind, **metadata})
     meta = {
         "kind": kind,
@@ -208,7 +209,7 @@ def save_checkpoint(name, model, kind, model_config, **metadata):
         "world": world_fingerprint(read),
         **metadata,
     }
-    js.write_text(json.dumps(meta, indent=1) + "\n")
+    atomic_write_text(js, json.dumps(meta, indent=1) + "\n")
     return pt, js
 
 

@@ -2,12 +2,12 @@
 registry (:data:`TASKS`).
 
 Every option of a task is generated from a field of the task's settings dataclass
-(facelib/config.py, whose defaults are the book's best measured settings; ``--paper``
-the paper's), with its help (:data:`FIELD_HELP`) and its default, so that the command
-line reaches every setting; only the fields in :data:`INTERNAL` (set from the input)
-have no option.  A task's own inputs (``--label``, ``--input``, ...) are listed in its
-registry entry. Each output ``.npz`` records the settings used and the sha256 of every
-checkpoint loaded to make it.
+(facelib/tasks/settings.py, whose defaults are the book's best measured settings;
+``--paper`` the paper's), with its help (:data:`FIELD_HELP`) and its default, so that
+the command line reaches every setting; only the fields in :data:`INTERNAL` (set from
+the input) have no option. A task's own inputs (``--label``, ``--input``, ...) are
+listed in its registry entry. Each output ``.npz`` records the settings used and the
+sha256 of every checkpoint loaded to make it.
 """
 
 from __future__ import annotations
@@ -331,8 +331,8 @@ TEXT = (
 
 @dataclass(frozen=True)
 class Task:
-    """A sampling task of the command line: what it does, its settings (config), how it
-    runs, its own inputs."""
+    """A sampling task of the command line: what it does, its settings
+    (tasks/settings.py), how it runs, its own inputs."""
 
     description: str
     settings: object
@@ -351,19 +351,19 @@ class Task:
 
 TASKS = {
     "unconditional": Task(
-        "the unconditional DDPM (§3.1)", config.Unconditional(), _unconditional
+        "the unconditional DDPM (§3.1)", tasks.Unconditional(), _unconditional
     ),
-    "label": Task("label control (Alg. 1)", config.LabelControl(), _label, (LABEL,)),
-    "text": Task("text control (Alg. 2)", config.TextControl(), _text, (TEXT,)),
+    "label": Task("label control (Alg. 1)", tasks.LabelControl(), _label, (LABEL,)),
+    "text": Task("text control (Alg. 2)", tasks.TextControl(), _text, (TEXT,)),
     "decoder": Task(
         "a text decoder's sequence refined by the DDPM (not in the paper)",
-        config.DecoderThenDiffusion(),
+        tasks.DecoderThenDiffusion(),
         _decoder,
         (TEXT,),
     ),
     "fill": Task(
         "expression filling (Alg. 3)",
-        config.Fill(),
+        tasks.Fill(),
         _fill,
         (
             (
@@ -388,7 +388,7 @@ TASKS = {
     ),
     "geometry": Task(
         "geometry-adaptive generation of a given face (Alg. 4)",
-        config.GeometryAdaptive(),
+        tasks.GeometryAdaptive(),
         _geometry,
         (
             (
@@ -413,7 +413,7 @@ TASKS = {
     "edit": Task(
         "change the expression of a given sequence: DDIM inversion, then label control"
         " (not in the paper)",
-        config.Edit(),
+        tasks.Edit(),
         _edit,
         (
             LABEL,
@@ -435,7 +435,7 @@ TASKS = {
     "au": Task(
         "AU-curve control: action units that follow requested intensity curves (not in"
         " the paper)",
-        config.AUControl(),
+        tasks.AUControl(),
         _au,
         (
             (
@@ -468,7 +468,7 @@ TASKS = {
     "long": Task(
         "any length: windows joined into one sequence that follows a schedule of"
         " labels (not in the paper)",
-        config.Long(),
+        tasks.Long(),
         _long,
         (
             (
@@ -513,7 +513,7 @@ TASKS = {
     "keyframes": Task(
         "chosen landmarks at chosen frames, a natural sequence around them (not in the"
         " paper)",
-        config.Keyframes(),
+        tasks.Keyframes(),
         _keyframes,
         (
             (
@@ -572,7 +572,7 @@ def settings_options(parser, task):
     None where the field allows it).
     """
     group = parser.add_argument_group(
-        f"settings (config.{type(TASKS[task].settings).__name__})"
+        f"settings (tasks.{type(TASKS[task].settings).__name__})"
     )
     for f in fields(TASKS[task].settings):
         if (task, f.name) in INTERNAL:
@@ -691,42 +691,7 @@ def settings_of(args):
             f.name: getattr(args, f.name) for f in fields(base) if hasattr(args, f.name)
         },
     )
-    if args.task in ("label", "edit") and settings.guidance == "cfg":
-        return settings  # classifier-free guidance has no classifier, no Adagrad rate
-    if args.task in ("label", "edit", "long") and settings.lr is None:
-        settings = replace(
-            settings, lr=tasks.adagrad_lr(settings.dataset, settings.steps)
-        )
-    if args.task == "text" and settings.guidance_weight is None:
-        settings = replace(
-            settings, guidance_weight=tasks.text_guidance_weight(settings.score)
-        )
-    if args.task == "au" and settings.method == "adagrad" and settings.lr is None:
-        settings = replace(
-            settings,
-            lr=tasks.step_scaled_lr(
-                config.AU_CURVE_LR, tasks.au.AU_CURVE_REFERENCE_STEPS, settings.steps
-            ),
-        )
-    if args.task == "text" and settings.lr is None:
-        settings = replace(
-            settings, lr=tasks.text_lr(settings.steps, score=settings.score)
-        )
-    if args.task == "long":
-        settings = replace(
-            settings,
-            text_guidance_weight=(
-                tasks.text_guidance_weight()
-                if settings.text_guidance_weight is None
-                else settings.text_guidance_weight
-            ),
-            text_lr=(
-                tasks.text_lr(settings.steps)
-                if settings.text_lr is None
-                else settings.text_lr
-            ),
-        )
-    return settings
+    return settings.resolved()
 
 
 def run(args):

@@ -16,8 +16,6 @@ from __future__ import annotations
 import ast
 import hashlib
 import json
-import os
-import tempfile
 import warnings
 from dataclasses import asdict, dataclass, field
 from functools import lru_cache
@@ -27,6 +25,7 @@ import numpy as np
 import torch
 
 from . import config
+from .files import atomic_write, atomic_write_text
 from .face import aus, expressions, sequences
 from .face.aus import AU_NAMES, Face
 from .face.expressions import BU_LABELS, COMA_LABELS, KIND_NAMES
@@ -271,18 +270,6 @@ def _sha256(path):
     return h.hexdigest()
 
 
-def _atomic_write(path, write):
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
-    os.close(fd)
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
-
-
 def cache_path(name, num_frames=40, cache_dir=None):
     spec = generated_spec(name)
     num_frames = _check_length(num_frames)
@@ -326,11 +313,8 @@ def build(name, num_frames=40, cache_dir=None, rebuild=False):
     arrays = None if rebuild else _read_verified(path)
     if arrays is None:
         arrays = generate(spec, _check_length(num_frames))
-        _atomic_write(path, lambda tmp: np.savez(open(tmp, "wb"), **arrays))
-        _atomic_write(
-            path.with_suffix(".sha256"),
-            lambda tmp: Path(tmp).write_text(_sha256(path) + "\n"),
-        )
+        atomic_write(path, lambda f: np.savez(f, **arrays))
+        atomic_write_text(path.with_suffix(".sha256"), _sha256(path) + "\n")
         _remove_stale(path)
     return arrays
 

@@ -32,7 +32,7 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
-from .diffusion import device_of, flow_alphas_bar, masked_mean
+from .diffusion import device_of, masked_mean
 
 SOLVERS = ("euler", "heun")
 

@@ -190,7 +190,7 @@ class KnownInput(torch.nn.Module):
         if not getattr(denoiser.config, "known_input", False):
             raise ValueError(
                 "this denoiser does not read known frames: use a join denoiser"
-                " (denoiser_<dataset>_join, config.DenoiserTraining.known_frames)"
+                " (denoiser_<dataset>_join, training.DenoiserTraining.known_frames)"
             )
         known = torch.as_tensor(known)
         if known.dtype != torch.bool or tuple(known.shape) != tuple(x0.shape[:2]):

@@ -1,6 +1,6 @@
 """End to end (paper §3.3, the end-to-end chapter): a neutral mesh -> its landmarks ->
 geometry-adaptive generation of an expression (Alg. 4, with the book's defaults,
-config.GeometryAdaptive), or a schedule of expressions of any length streamed window
+tasks.GeometryAdaptive), or a schedule of expressions of any length streamed window
 by window (tasks.long, the chapter "Any length") -> the landmark-guided deformation of
 the mesh (facelib/deformation.py).  A mesh of another topology, units or pose is first
 registered (facelib/registration.py, the chapter "Your own face") and the motion
@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import config, deformation, registration, tasks
+from . import checks, config, deformation, registration, tasks
 from .face import COMA_LABELS
 from .face import template as tpl
 
@@ -23,7 +23,7 @@ from .face import template as tpl
 def animate(
     neutral_vertices,
     label,
-    settings=config.GeometryAdaptive(),
+    settings=tasks.GeometryAdaptive(),
     model=None,
     denoiser=None,
     guide=None,
@@ -52,7 +52,7 @@ def animate(
 def animate_schedule(
     neutral_vertices,
     schedule,
-    settings=config.Long(),
+    settings=tasks.Long(),
     model=None,
     denoiser=None,
     guide=None,
@@ -62,9 +62,9 @@ def animate_schedule(
     """:func:`animate` for a schedule of any length (the chapter "Any length"): a string
     such as "high_smile:3s, neutral:1s, 'a broad grin':2s" (tasks.long.read_schedule) or
     a list of Segments, streamed by tasks.long.long_sequence with ``settings``
-    (config.Long; the frames at ``settings.fps``). Returns (meshes (F, V, 3),
+    (tasks.Long; the frames at ``settings.fps``). Returns (meshes (F, V, 3),
     landmarks (F, 68, 3), seconds per stage)."""
-    settings = config.with_overrides(settings, overrides)
+    settings = checks.with_overrides(settings, overrides)
     if isinstance(schedule, str):
         schedule = tasks.long.read_schedule(schedule, settings)
     return _generate_and_deform(
@@ -105,7 +105,7 @@ class Animation:
     frames: np.ndarray
     template_frames: np.ndarray
     landmarks: np.ndarray
-    registration: registration.Registration | None
+    registration: registration.FittedTemplate | None
     seconds: dict
 
 
@@ -138,7 +138,7 @@ def is_canonical_template(
 def animate_mesh(
     mesh,
     label=None,
-    registration_settings=config.Registration(),
+    registration_settings=registration.Registration(),
     progress=False,
     schedule=None,
     **overrides,
@@ -146,7 +146,7 @@ def animate_mesh(
     """A reader's mesh (registration.UserMesh: any topology, units, pose) animated with
     ``label`` or a ``schedule``: registration (unless it is a canonical template mesh),
     :func:`animate` (:func:`animate_schedule`) on the fitted template, the motion
-    carried back (Registration.transfer).  ``overrides`` go to :func:`animate` (order,
+    carried back (FittedTemplate.transfer).  ``overrides`` go to :func:`animate` (order,
     steps, seed...) or :func:`animate_schedule` (fps, steps, seed...).
     """
     if (label is None) == (schedule is None):

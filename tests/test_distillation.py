@@ -36,7 +36,7 @@ def test_the_clean_estimate_agrees_with_the_noise_estimate(prediction):
 
 @pytest.fixture(scope="module")
 def round_of_8():
-    settings = config.DistillationTraining(teacher_steps=8, batch_size=4).with_steps(2)
+    settings = training.DistillationTraining(teacher_steps=8, batch_size=4).with_steps(2)
     return training.DistillationRecipe(settings)
 
 
@@ -69,7 +69,7 @@ def test_a_round_trains_saves_and_teaches_the_next(round_of_8, tmp_path):
     assert meta["distilled_from"] == "denoiser_coma" and meta["distillation"]["teacher_steps"] == 8
     student = tasks.load_denoiser(str(tmp_path / "s4"))
     assert student.model.config.prediction == "v"
-    nxt = training.DistillationRecipe(config.DistillationTraining(
+    nxt = training.DistillationRecipe(training.DistillationTraining(
         teacher=str(tmp_path / "s4"), teacher_steps=4, batch_size=4).with_steps(1))
     assert nxt.checkpoint_name() == "student_denoiser_coma_2"
     assert nxt.data.settings.anatomy_swap == r.data.settings.anatomy_swap
@@ -77,17 +77,17 @@ def test_a_round_trains_saves_and_teaches_the_next(round_of_8, tmp_path):
 
 def test_bad_distillation_settings_are_refused():
     with pytest.raises(ValueError, match="teacher_steps must be even"):
-        config.DistillationTraining(teacher_steps=7)
-    with pytest.raises(ValueError, match="unknown distillation weighting 'x'; allowed: landing, truncated_snr, snr"):
-        config.DistillationTraining(weighting="x")
+        training.DistillationTraining(teacher_steps=7)
+    with pytest.raises(ValueError, match=r"weighting must be one of \('landing', 'truncated_snr', 'snr'\), got 'x'"):
+        training.DistillationTraining(weighting="x")
     with pytest.raises(ValueError, match="not a rectified flow"):
-        training.DistillationRecipe(config.DistillationTraining(teacher="denoiser_coma_flow"))
+        training.DistillationRecipe(training.DistillationTraining(teacher="denoiser_coma_flow"))
     with pytest.raises(ValueError, match="denoiser_coma is unconditional, it has no classifier-free guidance"):
-        training.DistillationRecipe(config.DistillationTraining(guidance_scale=2.0))
+        training.DistillationRecipe(training.DistillationTraining(guidance_scale=2.0))
 
 
 def test_a_student_samples_on_its_own_steps_and_refuses_others(tmp_path):
-    r = training.DistillationRecipe(config.DistillationTraining(teacher_steps=8, batch_size=4).with_steps(1))
+    r = training.DistillationRecipe(training.DistillationTraining(teacher_steps=8, batch_size=4).with_steps(1))
     training.train_and_save(r, name=str(tmp_path / "s"), progress=False)
     student = tasks.load_denoiser(str(tmp_path / "s"))
     chain = student.diffusion_with()
@@ -121,7 +121,7 @@ def test_the_landing_error_is_the_x0_error_times_the_steps_conditioning():
 def test_a_student_of_the_conditional_denoiser_samples_with_the_guidance_weight_distilled_in(tmp_path):
     """Meng et al. 2023 with one w: the first round's teacher is CFG-guided, the student
     samples guided in one call a step, and its own students keep its w."""
-    r = training.DistillationRecipe(config.DistillationTraining(
+    r = training.DistillationRecipe(training.DistillationTraining(
         teacher="denoiser_coma_cfg", teacher_steps=8, batch_size=4).with_steps(1))
     assert r.guidance_scale == config.CFG_SCALE
     x, t = torch.randn(2, 40, 68, 3), torch.full((2,), 900.0)
@@ -138,11 +138,11 @@ def test_a_student_of_the_conditional_denoiser_samples_with_the_guidance_weight_
     with pytest.raises(ValueError, match="samples with w = 2.5 distilled in, not scale = 4"):
         tasks.label_control("high_smile", 2, steps=4, sampler="student", guidance="cfg",
                             scale=4.0, denoiser=student, progress=False)
-    nxt = training.DistillationRecipe(config.DistillationTraining(
+    nxt = training.DistillationRecipe(training.DistillationTraining(
         teacher=str(tmp_path / "c4"), teacher_steps=4, batch_size=4).with_steps(1))
     assert nxt.guidance_scale == 2.5 and nxt.checkpoint_name() == "student_denoiser_coma_cfg_2"
     with torch.no_grad():  # a guided student's estimate is used as it is
         torch.testing.assert_close(nxt.teacher_x0(x, t, y), student.model.x0(x, t, labels=y))
     with pytest.raises(ValueError, match="keep it"):
-        training.DistillationRecipe(config.DistillationTraining(
+        training.DistillationRecipe(training.DistillationTraining(
             teacher=str(tmp_path / "c4"), teacher_steps=4, guidance_scale=1.0))

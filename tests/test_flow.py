@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 import torch
 
-from facelib import config
+from facelib import config, tasks, training
 from facelib.diffusion import GaussianDiffusion, flow_alphas_bar, named_betas
 from facelib.flow import RectifiedFlow, flow_scale
 from facelib.models.denoiser import Denoiser, DenoiserConfig
@@ -147,9 +147,9 @@ def test_bad_flow_input_is_refused():
     with pytest.raises(ValueError, match=r"tau must lie in \[0, 1\]"):
         flow.training_loss(model, torch.zeros(1, 4, 68, 3), tau=torch.tensor([1.5]))
     with pytest.raises(ValueError, match="prediction='u', not 'eps'"):
-        config.DenoiserTraining(schedule="flow")
+        training.DenoiserTraining(schedule="flow")
     with pytest.raises(ValueError, match="not the flow's"):
-        config.DenoiserTraining(schedule="flow", prediction="u", min_snr_gamma=5.0)
+        training.DenoiserTraining(schedule="flow", prediction="u", min_snr_gamma=5.0)
 
 
 def test_a_flow_denoisers_chain_of_k_steps_is_eulers_uniform_grid():
@@ -169,7 +169,7 @@ def test_a_flow_denoisers_chain_of_k_steps_is_eulers_uniform_grid():
     with pytest.raises(ValueError, match="unknown spacing 'leading'; allowed: uniform, trailing"):
         ref.diffusion_with(4, spacing="leading")
     with pytest.raises(ValueError, match="spacing must be one of"):
-        config.Unconditional(spacing="leading")
+        tasks.Unconditional(spacing="leading")
 
 
 def test_a_guide_of_another_schedule_reads_the_chains_noise_level():
@@ -196,10 +196,10 @@ def test_label_control_guides_the_flow_with_the_linear_schedules_classifier():
                                  GaussianDiffusion(named_betas("flow", T)),
                                  {"training": {"num_diffusion_steps": T, "schedule": "flow",
                                                "dataset": "coma"}, "name": "a small flow"})
-    settings = config.LabelControl(steps=4, sampler="flow")
+    settings = tasks.LabelControl(steps=4, sampler="flow")
     _, chain, matched = tasks.loading.guided_chain(guide, flow, settings)
     assert isinstance(matched.model, NoiseLevelMatched) and chain.eta == 0.0
-    _, _, same = tasks.loading.guided_chain(guide, ref, config.LabelControl(steps=4, sampler="ddim"))
+    _, _, same = tasks.loading.guided_chain(guide, ref, tasks.LabelControl(steps=4, sampler="ddim"))
     assert same is guide  # its own schedule: unchanged
     with pytest.raises(ValueError, match="denoiser_coma is sampled by 'ddpm' or 'ddim', not by 'flow'"):
         tasks.loading.guided_chain(guide, ref, settings)
@@ -221,9 +221,9 @@ def test_the_sampler_names_the_denoiser_it_runs_and_refuses_what_is_not_shipped(
         tasks.denoiser_name("coma", "flow", variant="cfg")
     with pytest.raises(ValueError, match="unknown sampler 'x'; allowed: ddpm, ddim, student, flow"):
         tasks.denoiser_name("coma", "x")
-    s = config.Unconditional(sampler="student", steps=4)
+    s = tasks.Unconditional(sampler="student", steps=4)
     assert s.fast().steps == 4 and s.ddim_eta == 0.0
-    assert config.Unconditional(sampler="flow").fast().steps == 20
+    assert tasks.Unconditional(sampler="flow").fast().steps == 20
 
 
 def test_the_mean_shift_guides_nothing_from_the_flows_pure_noise():

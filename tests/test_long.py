@@ -45,11 +45,11 @@ def test_a_schedule_with_a_text_runs_on_the_text_heads_labels():
 
 
 def test_a_text_segment_opens_as_written_or_said_in_order_and_a_label_by_its_raw_text():
-    settings = config.Long()
+    settings = tasks.Long()
     window = long.Window("a broad grin", 10, 30, (), True, True)
     assert long._guiding_text(window, settings) == "a broad grin"
     assert long._guiding_text(long.Window("high_smile", 10, 30, (), False), settings) == "high smile"
-    assert long._guiding_text(window, config.Long(text_opening="N2E")) == "from the neutral face to a broad grin"
+    assert long._guiding_text(window, tasks.Long(text_opening="N2E")) == "from the neutral face to a broad grin"
 
 
 @pytest.mark.parametrize("spec, message", [
@@ -83,7 +83,7 @@ def test_the_stream_starts_at_the_face_rests_on_it_and_is_deterministic(face, gu
     segments = long.parse_schedule("high_smile:1.5s, neutral:1s, free:1s", LABELS)
     kwargs = dict(steps=3, denoiser=denoiser, guide=guide, progress=False)
     chunks = list(long.stream(face, segments, 2, **kwargs))
-    windows = long.plan_windows(segments, 40, config.Long().transition)
+    windows = long.plan_windows(segments, 40, tasks.Long().transition)
     assert [c.shape[1] for c in chunks] == [w.keep for w in windows]
     x = np.concatenate(chunks, axis=1)
     assert x.shape == (2, 105, 68, 3) and x.dtype == np.float32 and np.isfinite(x).all()
@@ -177,8 +177,8 @@ def test_the_frame_rate_written_keeps_the_duration():
     assert long.resample_fps(x, 60).shape == (1, 121, 68, 3)
     np.testing.assert_allclose(long.resample_fps(x, 15)[:, 1], x[:, 2], atol=1e-5)
     with pytest.raises(ValueError, match="fps must be an integer in 10..60"):
-        config.Long(fps=120)
+        tasks.Long(fps=120)
     with pytest.raises(ValueError, match="transition must be"):
-        config.Long(transition=21)
+        tasks.Long(transition=21)
     with pytest.raises(ValueError, match="join must be one of"):
-        config.Long(join="blend")
+        tasks.Long(join="blend")

@@ -146,7 +146,7 @@ def test_edit_inverts_on_the_chain_it_regenerates_on(spacing, denoiser, coma_tes
     """invert used diffusion_with(steps, variance, 0) and dropped the spacing: with the guidance off, a trailing
     edit came back 0.056 mm off (0.015 uniform, DDIM-100, 8 sequences), now 0.021."""
     x = coma_test.landmarks[:2].astype(np.float64)
-    settings = config.Edit(steps=50, spacing=spacing)
+    settings = tasks.Edit(steps=50, spacing=spacing)
     chain = denoiser.chain_for(settings)
     x0 = torch.as_tensor(denoiser.normalizer.normalize(x), dtype=torch.float32)
     expected = chain.invert(denoiser.model, x0, refine=settings.refine)
@@ -157,18 +157,18 @@ def test_edit_inverts_on_the_chain_it_regenerates_on(spacing, denoiser, coma_tes
 
 
 def test_fast_mode_keeps_a_students_steps_in_every_task():
-    for settings in (config.Long(sampler="student", steps=4), config.GeometryAdaptive(sampler="student", steps=4),
-                     config.Fill(sampler="student", steps=4)):
+    for settings in (tasks.Long(sampler="student", steps=4), tasks.GeometryAdaptive(sampler="student", steps=4),
+                     tasks.Fill(sampler="student", steps=4)):
         assert settings.fast().steps == 4, type(settings).__name__
-    assert config.Long().fast().steps == 10 and config.Fill().fast().steps == 20
+    assert tasks.Long().fast().steps == 10 and tasks.Fill().fast().steps == 20
 
 
 def test_distillation_refuses_a_teacher_chain_the_student_teacher_was_not_distilled_for():
     """Refused when the recipe is made, before any training or writing."""
     with pytest.raises(ValueError, match="student_denoiser_coma_64 is a student of 64 deterministic steps .*"
                                          "distil it with teacher_steps=64, not 256"):
-        training.DistillationRecipe(config.DistillationTraining(teacher="student_denoiser_coma_64"))
-    r = training.DistillationRecipe(config.DistillationTraining(teacher="student_denoiser_coma_64", teacher_steps=64))
+        training.DistillationRecipe(training.DistillationTraining(teacher="student_denoiser_coma_64"))
+    r = training.DistillationRecipe(training.DistillationTraining(teacher="student_denoiser_coma_64", teacher_steps=64))
     assert r.checkpoint_name() == "student_denoiser_coma_32"
 
 

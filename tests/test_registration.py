@@ -8,7 +8,7 @@ import trimesh
 from hypothesis import HealthCheck, given, settings, strategies as st
 from scipy.spatial.transform import Rotation
 
-from facelib import config, registration as reg
+from facelib import registration as reg
 from facelib.__main__ import main as cli
 from facelib.face import scans
 from facelib.face.surface import _closest_on_triangles, closest_points
@@ -88,7 +88,7 @@ def test_bad_meshes_are_refused_with_what_is_allowed(tmp_path):
     with pytest.raises(ValueError, match="point cloud"):
         reg.read_mesh(tmp_path / "cloud.ply")
     with pytest.raises(ValueError, match="units must be one of"):
-        config.Registration(units="inch")
+        reg.Registration(units="inch")
 
 
 @pytest.fixture(scope="module")
@@ -128,8 +128,8 @@ def test_transfer_keeps_frame_0_and_carries_the_true_motion(scan_fit):
 def test_a_mesh_that_is_not_a_face_is_refused_with_its_residual(name):
     v, f = scans.not_faces()[name]
     with pytest.raises(reg.NotAFaceError, match=r"does not look like a face: .* residual of \d+\.\d\d mm") as e:
-        reg.register(reg.check_mesh(v, f), config.Registration().fast())
-    assert e.value.residual_mm > config.Registration().max_residual_mm
+        reg.register(reg.check_mesh(v, f), reg.Registration().fast())
+    assert e.value.residual_mm > reg.Registration().max_residual_mm
 
 
 def test_register_command_writes_the_fit_and_landmarks_or_nothing(tmp_path, capsys):

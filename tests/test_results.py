@@ -6,7 +6,7 @@ import re
 import numpy as np
 import pytest
 
-from facelib import metrics, results
+from facelib import metrics, results, tasks
 
 
 @pytest.fixture
@@ -68,16 +68,15 @@ def test_a_result_is_not_stored_from_uncommitted_code_unless_allowed(tmp_results
 
 
 def test_a_result_is_stale_when_its_world_or_the_defaults_it_measured_change(tmp_results):
-    from facelib import config
-    run = results.Run(checkpoints=[], seeds=[0], n=1, steps=[], wall_time_s=0.0, settings=(config.Fill(),),
+    run = results.Run(checkpoints=[], seeds=[0], n=1, steps=[], wall_time_s=0.0, settings=(tasks.Fill(),),
                       command="python benchmarks/fill_defaults.py --save demo")
     path = _save(run=run)
     record = json.loads(path.read_text())
-    assert record["settings"]["Fill"]["steps"] == config.Fill().steps and results.problems(record) == []
+    assert record["settings"]["Fill"]["steps"] == tasks.Fill().steps and results.problems(record) == []
     record["settings"]["Fill"]["steps"] = 7
     record["world"] = {"version": 1, "fingerprint": None}
     found = results.problems(record, "demo.json")
-    assert any("stale, config.Fill.steps was 7, is 100 now; re-run: python benchmarks/fill_defaults.py" in f
+    assert any("stale, tasks.Fill.steps was 7, is 100 now; re-run: python benchmarks/fill_defaults.py" in f
                for f in found), found
     assert any("stale, made on the datasets of world" in f for f in found), found
 

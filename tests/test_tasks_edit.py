@@ -38,16 +38,16 @@ def test_classifier_free_label_control_samples_the_conditional_denoiser(tiny_cfg
     c = tasks.label_control(["mouth_open", "bareteeth"], 2, scale=0.0, **kwargs)
     np.testing.assert_array_equal(b, c)  # w = 0: the unconditional model, whatever the label
     assert np.abs(a - b).max() > 1e-4
-    assert config.LabelControl(guidance="cfg").guidance_scale == config.CFG_SCALE
-    assert config.LabelControl().guidance_scale == config.MEAN_SHIFT_SCALE
+    assert tasks.LabelControl(guidance="cfg").guidance_scale == config.CFG_SCALE
+    assert tasks.LabelControl().guidance_scale == config.MEAN_SHIFT_SCALE
     # classifier guidance: Alg. 1 under DDPM, the mean shift under DDIM, unless chosen; --paper is Alg. 1
-    assert config.LabelControl().guidance_method == "adagrad"
-    assert config.LabelControl(sampler="ddim").guidance_method == "mean_shift"
-    assert config.LabelControl(sampler="ddim", method="adagrad").guidance_method == "adagrad"
-    assert config.LabelControl(sampler="ddim").paper().guidance_method == "adagrad"
-    assert config.Edit().guidance_method == "mean_shift"
-    assert config.Edit().guidance_scale == config.EDIT_MEAN_SHIFT_SCALE
-    assert config.Edit(guidance="cfg").guidance_scale == config.CFG_SCALE and config.Edit(scale=3.0).guidance_scale == 3
+    assert tasks.LabelControl().guidance_method == "adagrad"
+    assert tasks.LabelControl(sampler="ddim").guidance_method == "mean_shift"
+    assert tasks.LabelControl(sampler="ddim", method="adagrad").guidance_method == "adagrad"
+    assert tasks.LabelControl(sampler="ddim").paper().guidance_method == "adagrad"
+    assert tasks.Edit().guidance_method == "mean_shift"
+    assert tasks.Edit().guidance_scale == config.EDIT_MEAN_SHIFT_SCALE
+    assert tasks.Edit(guidance="cfg").guidance_scale == config.CFG_SCALE and tasks.Edit(scale=3.0).guidance_scale == 3
     with pytest.raises(ValueError, match="needs a label-conditional denoiser.*denoiser_coma is unconditional"):
         tasks.label_control("high_smile", 2, steps=2, guidance="cfg", denoiser=denoiser, progress=False)
     with pytest.raises(ValueError, match="unknown label 'smile'.*allowed: bareteeth"):
@@ -55,7 +55,7 @@ def test_classifier_free_label_control_samples_the_conditional_denoiser(tiny_cfg
     with pytest.raises(ValueError, match="scale must be a non-negative number"):
         tasks.label_control("high_smile", 2, scale=-1.0, **kwargs)
     with pytest.raises(ValueError, match="guidance must be one of"):
-        config.LabelControl(guidance="free")
+        tasks.LabelControl(guidance="free")
 
 
 def test_ddim_inversion_regenerates_a_test_sequence_and_refining_it_divides_the_error(denoiser, coma_test):
@@ -63,13 +63,13 @@ def test_ddim_inversion_regenerates_a_test_sequence_and_refining_it_divides_the_
     chain = denoiser.diffusion_with(50, eta=0.0)
 
     def rmse(refine):  # mm per landmark, over the sequence
-        back = denoiser.to_mm(chain.run(denoiser.model, tasks.invert(denoiser, x, config.Edit(steps=50, refine=refine)),
+        back = denoiser.to_mm(chain.run(denoiser.model, tasks.invert(denoiser, x, tasks.Edit(steps=50, refine=refine)),
                                         progress=False))
         return np.sqrt(((back - x) ** 2).sum(-1).mean((1, 2))).max()
     plain, refined = rmse(0), rmse(2)
     assert plain < 2.0 and refined < plain / 5, (plain, refined)
     with pytest.raises(ValueError, match="refine must be a number of fixed-point iterations >= 0"):
-        config.Edit(refine=-1)
+        tasks.Edit(refine=-1)
 
 
 def test_edit_changes_the_expression_and_refuses_bad_input(denoiser, coma_test):
@@ -104,7 +104,7 @@ def test_edit_changes_the_expression_and_refuses_bad_input(denoiser, coma_test):
     with pytest.raises(ValueError, match="label must be a label name or a list of n=2"):
         tasks.edit(x, ["mouth_open"], **kwargs)
     with pytest.raises(ValueError, match="no --paper version"):
-        config.Edit().paper()
+        tasks.Edit().paper()
     kwargs.pop("keep")
     with pytest.raises(ValueError, match="outside 0:40"):
         tasks.edit(x, "mouth_open", keep="38:41", **kwargs)
@@ -117,7 +117,7 @@ def test_edit_changes_the_expression_and_refuses_bad_input(denoiser, coma_test):
 def test_edit_keeps_the_frames_asked_for_and_regenerates_the_others(denoiser, coma_test):
     x = coma_test.landmarks[:2]
     kwargs = dict(steps=6, denoiser=denoiser, progress=False)
-    kept = tasks.edit(x, "mouth_open", **kwargs)  # the default keeps the neutral frame (config.Edit.keep)
+    kept = tasks.edit(x, "mouth_open", **kwargs)  # the default keeps the neutral frame (tasks.Edit.keep)
     np.testing.assert_array_equal(kept[:, 0], x[:, 0].astype(np.float32))
     assert np.abs(kept[:, 1:] - x[:, 1:]).max() > 0.5
     # the kept frame follows its own inversion path, which is the chain's own path: with no guidance pull,
@@ -131,9 +131,9 @@ def test_edit_with_classifier_free_guidance_inverts_with_the_free_model(tiny_cfg
     x = coma_test.landmarks[:1]
     kwargs = dict(steps=4, guidance="cfg", denoiser=tiny_cfg, progress=False)
     chain = tiny_cfg.diffusion_with(4, eta=0.0)
-    free = tasks.invert(tiny_cfg, x, config.Edit(steps=4))  # inverted by the free estimate (no label)
+    free = tasks.invert(tiny_cfg, x, tasks.Edit(steps=4))  # inverted by the free estimate (no label)
     guided = ClassifierFree(tiny_cfg.model, tiny_cfg.class_indices(["eyebrow"]), 3.0)
     np.testing.assert_allclose(tasks.edit(x, "eyebrow", scale=3.0, keep=None, **kwargs),
                                tiny_cfg.to_mm(chain.run(guided, free, progress=False)), atol=1e-4)
-    inverted_guided = tasks.invert(tiny_cfg, x, config.Edit(steps=4), model=guided)
+    inverted_guided = tasks.invert(tiny_cfg, x, tasks.Edit(steps=4), model=guided)
     assert (inverted_guided - free).abs().max() > 1e-3  # so the line above tells the two apart

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from facelib import config, inpainting, tasks
+from facelib import inpainting, tasks
 
 
 def test_fill_keeps_known_frames_exactly_and_is_deterministic(coma_test, denoiser):
@@ -33,8 +33,8 @@ def test_resampling_is_checked_and_one_means_plain_alg_3(coma_test, denoiser):
 
 
 def test_the_default_is_the_measured_best_and_paper_is_alg_3_as_printed(coma_test, denoiser):
-    """config.Fill: reconstruction guidance with the posterior variance (results/fill_defaults.json)."""
-    defaults, paper = config.Fill(), config.Fill().paper()
+    """tasks.Fill: reconstruction guidance with the posterior variance (results/fill_defaults.json)."""
+    defaults, paper = tasks.Fill(), tasks.Fill().paper()
     assert (defaults.variance, defaults.reconstruction_scale, defaults.resample) == ("posterior", 2.0, 1)
     assert (paper.steps, paper.variance, paper.reconstruction_scale, paper.resample) == (None, "beta", 0.0, 1)
     chain = denoiser.diffusion_with(6, "posterior")

@@ -18,7 +18,7 @@ from facelib.training.recipes import Recipe
 
 
 def _recipe(steps=6, **settings):
-    return training.DenoiserRecipe(config.DenoiserTraining(batch_size=8, **settings).with_steps(steps))
+    return training.DenoiserRecipe(training.DenoiserTraining(batch_size=8, **settings).with_steps(steps))
 
 
 def test_training_log_writes_running_means_every_n_steps_and_at_the_end():
@@ -31,7 +31,7 @@ def test_training_log_writes_running_means_every_n_steps_and_at_the_end():
 
 
 def test_learning_rate_warms_up_linearly_then_decays_by_a_cosine_to_its_final_fraction():
-    s = config.DenoiserTraining(steps=100, warmup=10, lr=1.0, final_lr_fraction=0.05)
+    s = training.DenoiserTraining(steps=100, warmup=10, lr=1.0, final_lr_fraction=0.05)
     assert learning_rate(s, 0, 100) == pytest.approx(0.1) and learning_rate(s, 9, 100) == pytest.approx(1.0)
     assert learning_rate(s, 10, 100) == pytest.approx(1.0)
     assert learning_rate(s, 55, 100) == pytest.approx(0.05 + 0.95 * 0.5)
@@ -177,7 +177,7 @@ class _BatchNormRecipe(Recipe):
     size = 64
 
     def __init__(self, steps=6):
-        self.settings = config.Optimisation(steps=steps, batch_size=8, ema_decay=0.9)
+        self.settings = training.Optimisation(steps=steps, batch_size=8, ema_decay=0.9)
         self.x = torch.randn(self.size, 3, generator=torch.Generator().manual_seed(0)) + 5
 
     def build(self, generator):
@@ -226,9 +226,9 @@ def test_a_resume_with_other_settings_is_refused_with_what_differs(tmp_path):
 
 def test_settings_refuse_impossible_values_with_the_allowed_ones():
     with pytest.raises(ValueError, match="optimizer must be one of"):
-        config.DenoiserTraining(optimizer="sgd")
+        training.DenoiserTraining(optimizer="sgd")
     with pytest.raises(ValueError, match="warmup"):
-        config.GuideTraining(steps=100, warmup=100)
+        training.GuideTraining(steps=100, warmup=100)
     with pytest.raises(ValueError, match="unknown model 'vae'; allowed: denoiser"):
         training.recipe("vae")
     with pytest.raises(ValueError, match="denoiser has no setting method; its settings: steps"):
@@ -330,7 +330,7 @@ def test_a_conditional_denoiser_trains_with_label_dropout_and_is_named_cfg():
     model, history = training.fit(recipe, progress=False)
     assert model.label_embedding.num_embeddings == 13 and np.isfinite(history["loss"]).all()
     with pytest.raises(ValueError, match="condition_dropout is a probability"):
-        config.DenoiserTraining(conditional=True, condition_dropout=1.0)
+        training.DenoiserTraining(conditional=True, condition_dropout=1.0)
 
 
 def test_mirroring_swaps_left_and_right_keeps_each_regions_motion_and_draws_nothing_when_off(coma_train):
@@ -433,8 +433,8 @@ def test_a_join_denoiser_is_refused_where_it_does_not_fit():
         training.recipe("denoiser", known_frames=0.5, start_from="denoiser_coma", prediction="v", steps=1).build(
             torch.Generator())
     with pytest.raises(ValueError, match="known_frames is a probability"):
-        config.DenoiserTraining(known_frames=1.5)
+        training.DenoiserTraining(known_frames=1.5)
     with pytest.raises(ValueError, match="train on one length"):
-        config.DenoiserTraining(known_frames=0.5, num_frames=(35, 45))
+        training.DenoiserTraining(known_frames=0.5, num_frames=(35, 45))
     with pytest.raises(ValueError, match="start_from names a denoiser checkpoint"):
-        config.DenoiserTraining(start_from="guide_coma_I")
+        training.DenoiserTraining(start_from="guide_coma_I")

@@ -2,7 +2,7 @@
 denoiser instead.
 
 A denoiser trained with its label dropped now and then
-(config.DenoiserTraining.conditional) estimates both eps(x_t, t, y) and eps(x_t, t, no
+(training.DenoiserTraining.conditional) estimates both eps(x_t, t, y) and eps(x_t, t, no
 label).  Their difference is, up to -sqrt(1 - abar_t), the gradient of an implicit
 classifier's log p(y | x_t) (Bayes: log p(y | x_t) = log p(x_t | y) - log p(x_t) +
 const), so
@@ -31,7 +31,8 @@ class ClassifierFree(nn.Module):
             raise ValueError(
                 "classifier-free guidance needs a label-conditional denoiser"
                 " (num_classes > 0; train one with"
-                " config.DenoiserTraining(conditional=True)); this one is unconditional"
+                " training.DenoiserTraining(conditional=True)); this one is"
+                " unconditional"
             )
         if isinstance(scale, bool) or not isinstance(scale, (int, float)) or scale < 0:
             raise ValueError(f"the guidance scale must be a number >= 0, got {scale!r}")

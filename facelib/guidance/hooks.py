@@ -36,6 +36,7 @@ import torch
 
 from ..config import ADAGRAD_STEPS, GUIDANCE_MIN_ABAR, GUIDANCE_WEIGHT
 from ..diffusion import GaussianDiffusion
+from ..checks import check_positive
 
 
 def _for_chain(score, diffusion):
@@ -71,20 +72,6 @@ def gradient_at(xt, fn):
         return torch.autograd.grad(fn(x).sum(), x)[0]
 
 
-def _check_positive(name, value, allow_zero=False):
-    if (
-        not isinstance(value, (int, float))
-        or isinstance(value, bool)
-        or value != value
-        or value < 0
-        or (value == 0 and not allow_zero)
-    ):
-        raise ValueError(
-            f"{name} must be a {'non-negative' if allow_zero else 'positive'} number,"
-            f" got {value!r}"
-        )
-
-
 @dataclass
 class OptimisationGuidance:
     """Alg. 1 line 10: ``num_steps`` Adagrad steps (a fresh optimiser at every diffusion
@@ -103,16 +90,16 @@ class OptimisationGuidance:
     max_time: float | None = None
 
     def __post_init__(self):
-        _check_positive(
+        check_positive(
             "guidance_weight (lambda)", self.guidance_weight, allow_zero=True
         )
-        _check_positive("the Adagrad learning rate", self.lr)
+        check_positive("the Adagrad learning rate", self.lr)
         if not isinstance(self.num_steps, int) or self.num_steps < 1:
             raise ValueError(
                 f"num_steps must be a positive integer, got {self.num_steps!r}"
             )
         if self.max_time is not None:
-            _check_positive("max_time", self.max_time)
+            check_positive("max_time", self.max_time)
         self.score = _for_chain(self.score, self.diffusion)
 
     def objective(self, x, out, t_prev):
@@ -150,7 +137,7 @@ class MeanShiftGuidance:
     scale: float = 1.0
 
     def __post_init__(self):
-        _check_positive("scale", self.scale, allow_zero=True)
+        check_positive("scale", self.scale, allow_zero=True)
         self.score = _for_chain(self.score, self.diffusion)
 
     def __call__(self, x_hat, xt, t, out):
@@ -203,7 +190,7 @@ class ReconstructionGuidance:
     scale: float = 1.0
 
     def __post_init__(self):
-        _check_positive(
+        check_positive(
             "the reconstruction guidance scale", self.scale, allow_zero=True
         )
         self.model = self.diffusion.wrap(self.model)

@@ -29,6 +29,7 @@ import torch
 
 from ..config import MATCH_TEMPERATURE
 from ..diffusion import GaussianDiffusion
+from ..checks import check_positive
 
 
 def _repeated(values, batch):
@@ -46,11 +47,6 @@ def _unit(values):
     return torch.nn.functional.normalize(
         torch.as_tensor(values, dtype=torch.float32), dim=-1
     )
-
-
-def _check_positive(name, value):
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0:
-        raise ValueError(f"{name} must be a positive number, got {value!r}")
 
 
 class _ChainScore:
@@ -120,9 +116,9 @@ class AUCurveScore(_ChainScore):
                 "curves and constrained must be two (n, F, A) arrays of one shape, got"
                 f" {tuple(self.curves.shape)} and {tuple(self.constrained.shape)}"
             )
-        _check_positive("tolerance", self.tolerance)
+        check_positive("tolerance", self.tolerance)
         # zero: no score at all (tasks.au.no_au_score)
-        _check_positive("weight", self.weight)
+        check_positive("weight", self.weight)
 
     def for_chain(self, diffusion):
         if self.denoiser is None:
@@ -172,7 +168,7 @@ def nearest_wording(description_table, text_embeddings):
 def match_log_weights(text_embeddings, references, match_temperature=MATCH_TEMPERATURE):
     """log w_n, w_n = softmax_n cos(E(c), E(r_n)) / match_temperature (B, N): how a text
     (B, D) matches its references (B, N, D), the w of :class:`ContrastiveScore`."""
-    _check_positive("the match temperature", match_temperature)
+    check_positive("the match temperature", match_temperature)
     return torch.log_softmax(
         torch.einsum("bd,bnd->bn", _unit(text_embeddings), _unit(references))
         / match_temperature,
@@ -189,7 +185,7 @@ def vocabulary_log_weights(
     near as its nearest description: a nearest-neighbour match, in which one more way to
     say a label raises that label's weight for the texts near it, and for no others.
     With K = 1 it is :func:`match_log_weights`."""
-    _check_positive("the match temperature", match_temperature)
+    check_positive("the match temperature", match_temperature)
     e, v = _unit(text_embeddings), _unit(vocabulary)
     if e.ndim != 2 or v.ndim != 3 or v.shape[-1] != e.shape[-1]:
         raise ValueError(
@@ -244,7 +240,7 @@ class ContrastiveScore(_ChainScore):
                 "need references (B, N, D) for text embeddings (B, D) = "
                 f"{tuple(shape)}, got {tuple(self.references.shape)}"
             )
-        _check_positive("the temperature", self.temperature)
+        check_positive("the temperature", self.temperature)
         if self.vocabulary is None:
             self.log_weights = match_log_weights(
                 self.text_embeddings, self.references, self.match_temperature

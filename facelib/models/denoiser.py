@@ -33,7 +33,7 @@ chapter "Any length") also reads the frames a task knows: KE([x_0 m, m]), a line
 embedding of the known frames' values and the mask m (B, F), is added to their tokens.
 It starts at zero, so a join denoiser fine-tuned from an unconditional one starts as
 that one, and is trained with random known frames
-(config.DenoiserTraining.known_frames).
+(training.DenoiserTraining.known_frames).
 
 The schedule "flow" is rectified flow's path (diffusion.flow_alphas_bar): its time
 labels are continuous, t = tau T with tau in [0, 1], and abar is computed, not looked

@@ -17,12 +17,13 @@ control, not in the paper, samples a label-conditional denoiser instead).
 * ``long``: sequences of any length from a schedule of labels, windows joined by
   expression filling (not in the paper)
 * ``loading``: the trained denoiser and guidance networks they sample with
+* ``settings``: each task's settings (``tasks.LabelControl()``, ...)
 
 Every task is called as ``task(what, n, settings, models..., progress, **overrides)``:
-``settings`` is the task's frozen dataclass in facelib/config.py (the book's recommended
-values; ``.paper()`` the paper's printed algorithm, ``.fast()`` a few steps) and
-``overrides`` change single fields, e.g. ``tasks.label_control("high_smile", 16,
-steps=100)``.
+``settings`` is the task's frozen dataclass in facelib/tasks/settings.py (the book's
+recommended values; ``.paper()`` the paper's printed algorithm, ``.fast()`` a few
+steps) and ``overrides`` change single fields, e.g. ``tasks.label_control("high_smile",
+16, steps=100)``.
 """
 
 from .au import (
@@ -54,12 +55,10 @@ from .keyframes import (
 )
 from .geometry import geometry_adaptive, geometry_passes, order_sensitive_label
 from .label import (
-    adagrad_lr,
     check_labels,
     label_control,
     label_sampler,
     load_conditional_denoiser,
-    step_scaled_lr,
 )
 from .loading import (
     TrainedDenoiser,
@@ -72,10 +71,38 @@ from .loading import (
     load_guide,
     load_text_head,
 )
-from .text import text_control, text_guidance_weight, text_lr, text_score
+from .text import text_control, text_score
 from .unconditional import unconditional
+from .settings import (
+    adagrad_lr,
+    step_scaled_lr,
+    text_guidance_weight,
+    text_lr,
+    AUControl,
+    DecoderThenDiffusion,
+    Edit,
+    Fill,
+    GeometryAdaptive,
+    Keyframes,
+    LabelControl,
+    Long,
+    Sampling,
+    TextControl,
+    Unconditional,
+)
 
 __all__ = [
+    "AUControl",
+    "DecoderThenDiffusion",
+    "Edit",
+    "Fill",
+    "GeometryAdaptive",
+    "Keyframes",
+    "LabelControl",
+    "Long",
+    "Sampling",
+    "TextControl",
+    "Unconditional",
     "long",
     "check_keys",
     "key_errors",

@@ -18,10 +18,8 @@ import torch
 from .. import data, rig_fit
 from ..config import (
     AU_ACTIVE,
-    AU_CURVE_LR,
     AU_MEASURABLE_FIT_ERROR,
     NUM_FRAMES,
-    AUControl,
 )
 from ..face.aus import AU_NAMES
 from ..guidance import (
@@ -33,11 +31,10 @@ from ..guidance import (
 )
 from ..inpainting import KnownFrames, keep_known, neutral_faces
 from .fill import known_noise
-from .label import step_scaled_lr
 from .loading import guided_chain, load_au_regressor, task_settings
+from .settings import AUControl
 
 AU_ALIASES = {"AU12": ("AU12L", "AU12R")}  # a symmetric smile: both lip corner pullers
-AU_CURVE_REFERENCE_STEPS = 50  # AU_CURVE_LR is chosen for chains of this length
 # The baseline that separates what the AU guidance adds from what animating a given face
 # costs: the same chain on the same face (frame 0 known, reconstruction guidance to it)
 # with the AU score's weight zero.  Not plain sampling: Alg. 1's Adagrad steps still
@@ -152,7 +149,7 @@ def au_control(
     neutral landmarks (68, 3) (or (n, 68, 3)) of the face to animate, which is then
     frame 0 (re-drawn from q as Alg. 3's known frames, with reconstruction guidance
     joining the other frames to it, as geometry-adaptive generation does); None: the
-    model draws the face too.  ``settings``: :class:`facelib.config.AUControl`."""
+    model draws the face too.  ``settings``: :class:`facelib.AUControl`."""
     settings, shape = task_settings(settings, overrides, n)
     regressor = regressor or load_au_regressor(settings.dataset)
     ranges = data_ranges(settings.dataset)
@@ -190,16 +187,7 @@ def au_control(
         else no_au_score
     )
     if settings.method == "adagrad":
-        lr = (
-            settings.lr
-            if settings.lr is not None
-            else step_scaled_lr(
-                AU_CURVE_LR,
-                AU_CURVE_REFERENCE_STEPS,
-                settings.steps,
-                regressor.meta["training"]["num_diffusion_steps"],
-            )
-        )
+        lr = settings.resolved(regressor.meta["training"]["num_diffusion_steps"]).lr
         hook = OptimisationGuidance(score, diffusion, settings.guidance_weight, lr)
     else:
         hook = MeanShiftGuidance(score, diffusion, settings.scale)

@@ -8,9 +8,9 @@ import numpy as np
 import torch
 
 from ..baselines import generate_from_text, load_baseline
-from ..config import DecoderThenDiffusion
 from .loading import denoiser_name, load_denoiser, task_settings
 from .text import text_list
+from .settings import DecoderThenDiffusion
 
 
 def decoder_then_diffusion(

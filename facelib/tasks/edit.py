@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from ..config import NUM_LANDMARKS, Edit
+from ..config import NUM_LANDMARKS
 from ..guidance import ClassifierFree
 from ..inpainting import (
     check_finite_landmarks,
@@ -24,6 +24,7 @@ from ..inpainting import (
 )
 from .label import check_labels, label_sampler
 from .loading import task_settings
+from .settings import Edit
 
 
 def check_sequences(sequences):
@@ -111,8 +112,8 @@ def edit(
     settings.keep (or the override ``keep=``): frames returned as given, as ranges "0:1"
     (the default: the neutral frame of an N2E sequence) or a mask (F,) or (n, F); they
     follow their own inversion path while the others are regenerated; None regenerates
-    every frame.  settings: :class:`facelib.config.Edit` (a
-    :class:`facelib.config.LabelControl` on a DDIM chain of 100 steps).  Classifier-free
+    every frame.  settings: :class:`facelib.Edit` (a
+    :class:`facelib.LabelControl` on a DDIM chain of 100 steps).  Classifier-free
     guidance inverts with the conditional denoiser told "no label"."""
     x = check_sequences(sequences)
     if overrides.get("num_frames", x.shape[1]) != x.shape[1]:

@@ -5,11 +5,12 @@ from __future__ import annotations
 
 import torch
 
-from ..config import Fill, with_overrides
 from ..face.sequences import check_num_frames
 from ..guidance import ReconstructionGuidance
 from ..inpainting import KnownFrames, check_fill_input, keep_known
 from .loading import denoiser_name, load_denoiser
+from .settings import Fill
+from ..checks import with_overrides
 
 
 def known_noise(seed):
@@ -31,7 +32,7 @@ def fill(
 
     sequences: (F, 68, 3) or (n, F, 68, 3) in mm; only the known frames are read (the
     others may hold anything, NaN included).  known: (F,) or (n, F) bool, True = known
-    frame.  settings: :class:`facelib.config.Fill`: resample r > 1 adds RePaint's
+    frame.  settings: :class:`facelib.Fill`: resample r > 1 adds RePaint's
     resampling (each step run r times); reconstruction_scale > 0 adds reconstruction
     guidance (not in the paper); ``settings.paper()`` is Alg. 3 as printed.
     Returns (n, F, 68, 3) float32 in mm whose known frames equal the given ones

@@ -7,7 +7,7 @@ import numpy as np
 import torch
 
 from .. import data
-from ..config import NUM_LANDMARKS, GeometryAdaptive
+from ..config import NUM_LANDMARKS
 from ..guidance import (
     ClassifierScore,
     OptimisationGuidance,
@@ -17,6 +17,7 @@ from ..guidance import (
 from ..inpainting import KnownFrames, keep_known, neutral_faces
 from .fill import known_noise
 from .loading import guided_chain, load_guide, task_settings
+from .settings import GeometryAdaptive
 
 
 def order_sensitive_label(label, order=None):
@@ -90,7 +91,7 @@ def geometry_passes(
     (default) or "E2N"; or a type-S class name such as "mouth_open E2N"; or a list of n
     such labels.  Guided by the type-S classifier through Alg. 1's Adagrad steps; pass i
     > 1 re-noises the previous result to ``settings.renoise_step`` with Eq. 3 (None: to
-    T, as the paper).  settings: :class:`facelib.config.GeometryAdaptive`
+    T, as the paper).  settings: :class:`facelib.GeometryAdaptive`
     (reconstruction_scale > 0 adds reconstruction guidance after the label guidance,
     joining the generated frames to the given face; ``settings.paper()`` is Alg. 4 as
     printed); ``overrides`` change single fields."""

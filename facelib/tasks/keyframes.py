@@ -30,12 +30,12 @@ from ..config import (
     KEYFRAME_TOLERANCE,
     NUM_FRAMES,
     NUM_LANDMARKS,
-    Keyframes,
 )
 from ..guidance import ReconstructionGuidance
 from ..inpainting import LANDMARK_LIMIT_MM, KnownFrames, landmark_array, neutral_faces
 from .fill import known_noise
 from .loading import denoiser_name, load_denoiser, task_settings
+from .settings import Keyframes
 
 KEY_FIELDS = ("frame", "landmark")
 KEY_TARGETS = ("position", "displacement")
@@ -153,7 +153,7 @@ def keyframes(
 ):
     """n sequences (n, F, 68, 3) float32 in mm that meet landmark keyframes
     (:func:`check_keys`), generated around them by the unconditional DDPM.
-    ``settings``: :class:`facelib.config.Keyframes` (the method)."""
+    ``settings``: :class:`facelib.Keyframes` (the method)."""
     settings, shape = task_settings(settings, overrides, n)
     neutral = None if neutral is None else check_neutral(neutral)
     given, mask = check_keys(keys, shape[1], neutral)

@@ -4,7 +4,6 @@ denoiser."""
 
 from __future__ import annotations
 
-from ..config import NUM_DIFFUSION_STEPS, ADAGRAD_LR, LR_REFERENCE_STEPS, LabelControl
 from ..guidance import (
     ClassifierFree,
     ClassifierScore,
@@ -18,37 +17,7 @@ from .loading import (
     load_guide,
     task_settings,
 )
-
-
-def step_scaled_lr(
-    rate, reference_steps, steps=None, num_steps=NUM_DIFFUSION_STEPS, power=0.5
-):
-    """An Adagrad rate chosen for a chain of ``reference_steps`` reverse steps, for a
-    chain of ``steps`` (None: T = ``num_steps``): scaled by (reference_steps / steps) **
-    power, so that the guidance moves a sample about as far over the whole chain
-    whatever its length (our choice).
-
-    power 0.5: the guided displacements of successive steps add up like a random walk,
-    as the square root of the number of steps (label control;
-    benchmarks/label_control.py measures it at T = 2000, where the unscaled rate
-    overshoots).  power 1: they add up like a drift, linearly (text control:
-    benchmarks/text_control.py measures that the square root still overshoots at T =
-    2000).
-    """
-    return rate * float((reference_steps / (steps or num_steps)) ** power)
-
-
-def adagrad_lr(dataset, steps=None, num_steps=NUM_DIFFUSION_STEPS):
-    """The default Adagrad rate of label control (Alg. 1) for a chain of ``steps``
-    reverse steps (None: T): ADAGRAD_LR[dataset], chosen at LR_REFERENCE_STEPS, through
-    :func:`step_scaled_lr`.
-    """
-    if dataset not in ADAGRAD_LR:
-        raise ValueError(
-            f"no default Adagrad learning rate for dataset {dataset!r} (defaults for "
-            f"{', '.join(ADAGRAD_LR)}): pass lr="
-        )
-    return step_scaled_lr(ADAGRAD_LR[dataset], LR_REFERENCE_STEPS, steps, num_steps)
+from .settings import LabelControl
 
 
 def label_control(
@@ -65,7 +34,7 @@ def label_control(
     ``label``.
 
     label: a label name of the dataset (e.g. "high_smile"), or a list of n names (one
-    per sequence). settings: :class:`facelib.config.LabelControl`: the guidance
+    per sequence). settings: :class:`facelib.LabelControl`: the guidance
     ("classifier": a noisy classifier steers the unconditional denoiser, by Alg. 1's 3
     Adagrad steps on lambda log p_theta + log p_phi or by the classic mean shift; "cfg":
     classifier-free guidance of the label-conditional denoiser), lambda, the rate (None:
@@ -153,13 +122,7 @@ def label_sampler(labels, settings, denoiser=None, guide=None):
     denoiser, diffusion, guide = guided_chain(guide, denoiser, settings)
     score = ClassifierScore(guide.model, guide.class_indices(labels))
     if settings.guidance_method == "adagrad":
-        lr = settings.lr
-        if lr is None:
-            lr = adagrad_lr(
-                guide.dataset,
-                settings.steps,
-                guide.meta["training"]["num_diffusion_steps"],
-            )
+        lr = settings.resolved(guide.meta["training"]["num_diffusion_steps"]).lr
         hook = OptimisationGuidance(score, diffusion, settings.guidance_weight, lr)
     else:
         hook = MeanShiftGuidance(score, diffusion, settings.guidance_scale)

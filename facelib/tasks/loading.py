@@ -20,7 +20,6 @@ from ..config import (
     SAMPLERS,
     SPACINGS,
     TEXT_DATASET,
-    with_overrides,
 )
 from ..data import LandmarkNormalizer
 from ..diffusion import (
@@ -41,6 +40,7 @@ from ..models.noisy_classifier import (
     TextHeadConfig,
 )
 from ..text import EMBEDDING_DIM, MODEL_NAME
+from ..checks import with_overrides
 
 
 @dataclass
@@ -72,7 +72,7 @@ class TrainedDenoiser:
         if not self.model.config.num_classes or not names:
             raise ValueError(
                 "classifier-free guidance needs a label-conditional denoiser (train"
-                " one with config.DenoiserTraining(conditional=True):"
+                " one with training.DenoiserTraining(conditional=True):"
                 f" denoiser_<dataset>_cfg); {self.meta.get('name', 'this checkpoint')}"
                 " is unconditional"
             )
@@ -131,7 +131,7 @@ class TrainedDenoiser:
         return ("ddpm", "ddim")
 
     def chain_for(self, settings):
-        """The chain of a task's settings (config.Sampling: steps, variance, sampler,
+        """The chain of a task's settings (Sampling: steps, variance, sampler,
         spacing); a clear error for a sampler this checkpoint was not made for."""
         if settings.sampler not in self.samplers:
             raise ValueError(

@@ -46,8 +46,6 @@ from ..config import (
     NUM_LANDMARKS,
     SCHEDULE_FREE,
     SCHEDULE_NEUTRAL,
-    Long,
-    with_overrides,
 )
 from ..descriptions import in_order, raw_text
 from ..guidance import (
@@ -63,7 +61,6 @@ from ..inpainting import KnownFrames, KnownInput, keep_known, neutral_faces
 from ..metrics import resample_frames
 from ..text import check_text, get_encoder
 from .fill import known_noise
-from .label import adagrad_lr
 from .loading import (
     check_n,
     denoiser_name,
@@ -72,7 +69,8 @@ from .loading import (
     load_guide,
     load_text_head,
 )
-from .text import text_guidance_weight, text_lr
+from .settings import Long
+from ..checks import with_overrides
 
 
 @dataclass(frozen=True)
@@ -267,13 +265,8 @@ def _label_guidance(window, n, diffusion, guides, settings):
         guide, lr = guides["S"], settings.opening_lr
         label = f"{window.what} {settings.opening}"
     else:
-        guide, lr, label = guides["I"], settings.lr, window.what
-        if lr is None:
-            lr = adagrad_lr(
-                guide.dataset,
-                settings.steps,
-                guide.meta["training"]["num_diffusion_steps"],
-            )
+        guide, label = guides["I"], window.what
+        lr = settings.resolved(guide.meta["training"]["num_diffusion_steps"]).lr
     score = ClassifierScore(guide.model, guide.class_indices([label] * n))
     return OptimisationGuidance(score, diffusion, settings.guidance_weight, lr)
 
@@ -293,12 +286,9 @@ def _text_guidance(window, n, diffusion, guides, settings):
     head = guides["text"]
     embedding = guides["embeddings"][_guiding_text(window, settings)]
     score = CosineScore(head.model, embedding.expand(n, -1))
-    weight = settings.text_guidance_weight
-    lr = settings.text_lr
-    if lr is None:
-        lr = text_lr(settings.steps, head.meta["training"]["num_diffusion_steps"])
+    resolved = settings.resolved(head.meta["training"]["num_diffusion_steps"])
     return OptimisationGuidance(
-        score, diffusion, text_guidance_weight() if weight is None else weight, lr
+        score, diffusion, resolved.text_guidance_weight, resolved.text_lr
     )
 
 
@@ -420,7 +410,7 @@ def drawn_face(seed):
 def _check(neutral, schedule, n, settings, overrides):
     if not isinstance(settings, Long):
         raise TypeError(
-            f"settings must be facelib.config.Long, got {type(settings).__name__}"
+            f"settings must be facelib.Long, got {type(settings).__name__}"
         )
     settings = with_overrides(settings, overrides)
     check_n(n)

@@ -7,16 +7,6 @@ import numpy as np
 import torch
 
 from .. import data
-from ..config import (
-    NUM_DIFFUSION_STEPS,
-    CONTRASTIVE_GUIDANCE_WEIGHT,
-    CONTRASTIVE_LR,
-    TEXT_GUIDANCE_WEIGHT,
-    TEXT_LR,
-    TEXT_LR_REFERENCE_STEPS,
-    TEXT_SCORES,
-    TextControl,
-)
 from ..guidance import (
     BestOfK,
     ContrastiveScore,
@@ -26,29 +16,8 @@ from ..guidance import (
     nearest_wording,
 )
 from ..text import description_embeddings, get_encoder
-from .label import step_scaled_lr
 from .loading import check_n, guided_chain, load_text_head, task_settings
-
-
-def text_lr(steps=None, num_steps=NUM_DIFFUSION_STEPS, score="cosine"):
-    """The default Adagrad rate of text control (Alg. 2) for a chain of ``steps``
-    reverse steps (None: T): TEXT_LR (CONTRASTIVE_LR for the contrastive score), chosen
-    at TEXT_LR_REFERENCE_STEPS, through :func:`step_scaled_lr` with power 1."""
-    if score not in TEXT_SCORES:
-        raise ValueError(f"score must be one of {TEXT_SCORES}, got {score!r}")
-    rate = CONTRASTIVE_LR if score == "contrastive" else TEXT_LR
-    return step_scaled_lr(rate, TEXT_LR_REFERENCE_STEPS, steps, num_steps, power=1.0)
-
-
-def text_guidance_weight(score="cosine"):
-    """The default lambda of text control for a score: TEXT_GUIDANCE_WEIGHT (cosine; not
-    the paper's 0.01: the cosine's gradient is small, and Adagrad's steps follow the
-    sign of the sum) or CONTRASTIVE_GUIDANCE_WEIGHT (contrastive)."""
-    if score not in TEXT_SCORES:
-        raise ValueError(f"score must be one of {TEXT_SCORES}, got {score!r}")
-    return (
-        CONTRASTIVE_GUIDANCE_WEIGHT if score == "contrastive" else TEXT_GUIDANCE_WEIGHT
-    )
+from .settings import TextControl
 
 
 def text_list(text, n):
@@ -111,7 +80,7 @@ def text_control(
     a list of n descriptions (one per sequence), each embedded once by the offline
     sentence encoder E (empty, non-string or too long texts are refused).  At every step
     3 Adagrad steps maximise lambda log p_theta(x | x_t) + score(x, t-1)
-    (:func:`text_score`).  settings: :class:`facelib.config.TextControl` (lambda None:
+    (:func:`text_score`).  settings: :class:`facelib.TextControl` (lambda None:
     :func:`text_guidance_weight`; rate None: :func:`text_lr`; particles K > 1:
     :class:`~facelib.guidance.BestOfK` at the step nearest the time label select_time,
     no callback); ``overrides`` change single fields."""
@@ -130,18 +99,8 @@ def text_control(
         )
     denoiser, diffusion, head = guided_chain(head, denoiser, settings)
     score = text_score(settings, head, denoiser, embeddings)
-    weight = (
-        text_guidance_weight(settings.score)
-        if settings.guidance_weight is None
-        else settings.guidance_weight
-    )
-    lr = settings.lr
-    if lr is None:
-        lr = text_lr(
-            settings.steps,
-            head.meta["training"]["num_diffusion_steps"],
-            settings.score,
-        )
+    resolved = settings.resolved(head.meta["training"]["num_diffusion_steps"])
+    weight, lr = resolved.guidance_weight, resolved.lr
     hook = OptimisationGuidance(
         score, diffusion, weight, lr, max_time=settings.max_time
     )

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from ..config import Unconditional
 from .loading import denoiser_name, load_denoiser, task_settings
+from .settings import Unconditional
 
 
 def unconditional(
@@ -17,7 +17,7 @@ def unconditional(
     """Sample ``n`` landmark sequences (n, F, 68, 3) float32 in mm from the
     unconditional DDPM.
 
-    settings: :class:`facelib.config.Unconditional` (steps: None for the paper's T =
+    settings: :class:`facelib.Unconditional` (steps: None for the paper's T =
     2000, or fewer, respaced without retraining); ``overrides`` change single fields,
     e.g. ``steps=100``.
     """

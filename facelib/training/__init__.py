@@ -7,8 +7,9 @@
     training.train_all()  # python -m facelib train all
 
 The same loop runs unchanged under ``torchrun --nproc_per_node N -m facelib train NAME``
-(distributed data parallel; see the loop's docstring).  Every setting's default is in
-facelib/config.py.
+(distributed data parallel; see the loop's docstring).  Every recipe's settings, with
+their defaults and sources, are in facelib/training/settings.py (``training.
+DenoiserTraining()``, ...).
 """
 
 from __future__ import annotations
@@ -18,7 +19,6 @@ import time
 from dataclasses import asdict, fields, replace
 from pathlib import Path
 
-from .. import results
 from ..checkpoints import check_world, checkpoint_paths, save_checkpoint
 from .loop import Draws, TrainingLog, fit, is_main_process
 from .recipes import (
@@ -39,9 +39,35 @@ from .recipes import (
     text_head_loss,
     training_anatomies,
 )
+from .settings import (
+    AURegressorTraining,
+    ActorTraining,
+    DeformationTraining,
+    DenoiserTraining,
+    DistillationTraining,
+    EvaluatorTraining,
+    GuideTraining,
+    LSTMFillerTraining,
+    Motion3DGANTraining,
+    MotionClipTraining,
+    Optimisation,
+    TextHeadTraining,
+)
 from .shipped import SHIPPED
 
 __all__ = [
+    "AURegressorTraining",
+    "ActorTraining",
+    "DeformationTraining",
+    "DenoiserTraining",
+    "DistillationTraining",
+    "EvaluatorTraining",
+    "GuideTraining",
+    "LSTMFillerTraining",
+    "Motion3DGANTraining",
+    "MotionClipTraining",
+    "Optimisation",
+    "TextHeadTraining",
     "Draws",
     "TrainingLog",
     "fit",
@@ -79,8 +105,8 @@ def recipe(model_name, fast=False, **settings):
 
 
 def settings_for(model_name, fast=False, **settings):
-    """A model's training settings: its defaults (facelib/config.py) changed by
-    ``settings``.
+    """A model's training settings: its defaults (facelib/training/settings.py)
+    changed by ``settings``.
 
     ``steps`` keeps the warm-up at most a tenth of the run
     (``Optimisation.with_steps``); ``fast``: the settings' fast-mode version (a few
@@ -183,8 +209,8 @@ def train_all(
     exist and were trained on this process's world with their recipe's current settings;
     ``resume``: continue each from the training state a stopped run left (recipes that
     walk epochs, the IC's, start over).  Returns rows [name, model, steps, seconds]; a
-    run into data/checkpoints that trained something rewrites results/train_all.json
-    (:func:`store_training_times`)."""
+    run into data/checkpoints that trained something is recorded in
+    results/train_all.json by the command line (``results.store_training_times``)."""
     names = list(SHIPPED) if names is None else list(names)
     unknown = [n for n in names if n not in SHIPPED]
     if unknown:
@@ -219,45 +245,4 @@ def train_all(
             ]
         )
         print(f"{name}: {rows[-1][3]:.0f} s", flush=True)
-    if out_dir is None and not fast and rows:
-        store_training_times()
     return rows
-
-
-def store_training_times():
-    """results/train_all.json: every shipped checkpoint of this world with its steps and
-    the wall time its checkpoint recorded (the last run's, when a stopped run was
-    resumed)."""
-    rows, seeds = [], set()
-    for name, (model, _) in SHIPPED.items():
-        if trained_on_this_world(name):
-            meta = json.loads(checkpoint_paths(name)[1].read_text())
-            steps = meta["training"].get("epochs") or meta["training"]["steps"]
-            seeds.add(int(meta["training"].get("seed", 0)))
-            rows.append(
-                [
-                    name,
-                    model,
-                    steps,
-                    meta.get("wall_time_s"),
-                    bool(meta.get("resumed", False)),
-                ]
-            )
-    results.save_result(
-        "train_all",
-        "Training every shipped checkpoint (python -m facelib train all)",
-        ["checkpoint", "model", "steps (epochs for the IC)", "seconds", "resumed"],
-        rows,
-        results.Run(
-            checkpoints=[r[0] for r in rows],
-            seeds=sorted(seeds),
-            n=len(rows),
-            steps=[],
-            wall_time_s=sum(r[3] or 0.0 for r in rows),
-            command="python -m facelib train all",
-        ),
-        notes=(
-            "seconds: the wall time recorded in each checkpoint (None: trained before"
-            " it was recorded)"
-        ),
-    )

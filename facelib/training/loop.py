@@ -39,8 +39,9 @@ from typing import Callable
 import numpy as np
 import torch
 from tqdm.auto import tqdm
+from ..files import atomic_write
+from .settings import Optimisation
 
-from ..config import Optimisation
 
 
 class TrainingLog:
@@ -497,16 +498,7 @@ def _save_state(path, step, trained, record, random_states):
         "history": t.log.history,
         "running": t.log._running,
     }
-    path.parent.mkdir(parents=True, exist_ok=True)
-    partial = path.with_name(path.name + ".partial")
-    try:
-        with open(partial, "wb") as f:
-            torch.save(state, f)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(partial, path)
-    finally:
-        partial.unlink(missing_ok=True)
+    atomic_write(path, lambda f: torch.save(state, f))
 
 
 def _load_state(path, trained, record, dist):

@@ -1,5 +1,5 @@
-"""One recipe per trained model: its settings (facelib/config.py), its data, its model
-and the loss of a batch.
+"""One recipe per trained model: its settings (training/settings.py), its data, its
+model and the loss of a batch.
 
 A recipe is what :func:`facelib.training.loop.fit` needs: ``name``, ``settings``,
 ``size`` (number of training examples), ``build(generator)`` (a fresh model,
@@ -40,6 +40,19 @@ from ..models.noisy_classifier import (
 from ..tasks import load_denoiser
 from ..text import MODEL_NAME, description_embeddings, get_encoder
 from .loop import Draws, Objective
+from .settings import (
+    AURegressorTraining,
+    ActorTraining,
+    DeformationTraining,
+    DenoiserTraining,
+    DistillationTraining,
+    EvaluatorTraining,
+    GuideTraining,
+    LSTMFillerTraining,
+    Motion3DGANTraining,
+    MotionClipTraining,
+    TextHeadTraining,
+)
 
 
 class Recipe:
@@ -136,7 +149,7 @@ class DenoiserRecipe(Recipe):
 
     kind = "denoiser"
 
-    def __init__(self, settings=config.DenoiserTraining(), model_config=None):
+    def __init__(self, settings=DenoiserTraining(), model_config=None):
         self.settings = settings
         train = data.load_dataset(
             settings.dataset, "train", num_frames=settings.num_frames
@@ -331,7 +344,7 @@ class DenoiserRecipe(Recipe):
     def known_mask(self, draws, num_frames):
         """The known frames (B, F) of a join denoiser's training batch: with probability
         ``known_frames`` the first k ~ U{1..F/2} frames (the transition a window of a
-        long sequence knows, config.Long), and half the time the last frame too (the
+        long sequence knows, tasks.Long), and half the time the last frame too (the
         anchor of a rest that ends with its window); else none.  A rest that ends inside
         a window (one that opens a schedule, or lasts no whole number of windows) is
         anchored at a frame it was not trained with."""
@@ -395,7 +408,7 @@ class DistillationRecipe(Recipe):
 
     kind = "denoiser"
 
-    def __init__(self, settings=config.DistillationTraining(), model_config=None):
+    def __init__(self, settings=DistillationTraining(), model_config=None):
         self.settings = settings
         self.teacher = load_denoiser(settings.teacher)
         self.teacher.model.eval().requires_grad_(False)
@@ -408,10 +421,10 @@ class DistillationRecipe(Recipe):
         self._check_teacher_grid(recorded.get("sampler_steps"))
         # the teacher's data as the teacher saw it (a student records its DDPM's)
         self.data = DenoiserRecipe(
-            config.DenoiserTraining(
+            DenoiserTraining(
                 **{
                     f.name: _as_setting(recorded[f.name])
-                    for f in fields(config.DenoiserTraining)
+                    for f in fields(DenoiserTraining)
                     if f.name in recorded
                     and f.name not in ("steps", "warmup", "prediction")
                 }
@@ -620,7 +633,7 @@ class GuideRecipe(_NoisyRecipe):
 
     kind = "guide"
 
-    def __init__(self, settings=config.GuideTraining(), model_config=None):
+    def __init__(self, settings=GuideTraining(), model_config=None):
         data.check_classifier_type(settings.classifier_type)
         self._prepare(settings)
         self.name = f"guide ({settings.dataset}, type {settings.classifier_type})"
@@ -658,7 +671,7 @@ class AURegressorRecipe(_NoisyRecipe):
 
     kind = "au_regressor"
 
-    def __init__(self, settings=config.AURegressorTraining(), model_config=None):
+    def __init__(self, settings=AURegressorTraining(), model_config=None):
         self._prepare(settings)
         self.name = f"AU regressor ({settings.dataset})"
         self.au_weights = torch.as_tensor(self.train.au_weights, dtype=torch.float32)
@@ -726,7 +739,7 @@ class TextHeadRecipe(_NoisyRecipe):
     kind = "text_head"
 
     def __init__(
-        self, settings=config.TextHeadTraining(), model_config=None, encoder=None
+        self, settings=TextHeadTraining(), model_config=None, encoder=None
     ):
         self._prepare(settings)
         self.name = f"text head ({settings.dataset})"
@@ -776,7 +789,7 @@ class EvaluatorRecipe(Recipe):
 
     kind = "evaluator"
 
-    def __init__(self, settings=config.EvaluatorTraining()):
+    def __init__(self, settings=EvaluatorTraining()):
         data.check_classifier_type(settings.classifier_type)
         self.settings = settings
         self.name = (
@@ -839,7 +852,7 @@ class _BaselineRecipe(Recipe):
 class ActorRecipe(_BaselineRecipe):
     """The ACTOR-style CVAE: reconstruction + kl_weight x KL."""
 
-    def __init__(self, settings=config.ActorTraining()):
+    def __init__(self, settings=ActorTraining()):
         self._prepare(settings, "actor")
         self.delta = torch.as_tensor(self.train.delta_landmarks())
         self.labels = torch.as_tensor(self.train.labels)
@@ -874,7 +887,7 @@ class ActorRecipe(_BaselineRecipe):
 class MotionClipRecipe(_BaselineRecipe):
     """The MotionCLIP-style decoder: text embedding -> motion, mean squared error."""
 
-    def __init__(self, settings=config.MotionClipTraining(), encoder=None):
+    def __init__(self, settings=MotionClipTraining(), encoder=None):
         self._prepare(settings, "motionclip")
         self.table = description_embeddings(self.train, encoder or get_encoder())
         self.delta = torch.as_tensor(self.train.delta_landmarks())
@@ -908,7 +921,7 @@ class Motion3DGANRecipe(_BaselineRecipe):
     # the reconstruction partner of each example is drawn within its class
     distributed = False
 
-    def __init__(self, settings=config.Motion3DGANTraining()):
+    def __init__(self, settings=Motion3DGANTraining()):
         self._prepare(settings, "motion3dgan")
         self.num_classes = len(self.train.label_names)
         q, self.length = motion3dgan.prepare(self.train, settings.smoothing)
@@ -1029,7 +1042,7 @@ class LSTMFillerRecipe(_BaselineRecipe):
 
     distributed = False  # the filler draws its own noise inside the forward pass
 
-    def __init__(self, settings=config.LSTMFillerTraining()):
+    def __init__(self, settings=LSTMFillerTraining()):
         self._prepare(settings, "lstm_filler")
         self.normalizer = data.LandmarkNormalizer.fit(self.train)
         self.x_all = torch.as_tensor(self.normalizer.normalize(self.train.landmarks))
@@ -1064,7 +1077,7 @@ class DeformationRecipe(Recipe):
 
     kind = "deformer"
 
-    def __init__(self, settings=config.DeformationTraining()):
+    def __init__(self, settings=DeformationTraining()):
         s = self.settings = settings
         self.name = (
             f"deformer ({deformation.check_method(s.method)},"
@@ -1136,15 +1149,15 @@ RECIPES = {
     "student": DistillationRecipe,
 }
 SETTINGS = {
-    "denoiser": config.DenoiserTraining,
-    "guide": config.GuideTraining,
-    "text_head": config.TextHeadTraining,
-    "evaluator": config.EvaluatorTraining,
-    "actor": config.ActorTraining,
-    "motionclip": config.MotionClipTraining,
-    "motion3dgan": config.Motion3DGANTraining,
-    "lstm_filler": config.LSTMFillerTraining,
-    "deformer": config.DeformationTraining,
-    "au_regressor": config.AURegressorTraining,
-    "student": config.DistillationTraining,
+    "denoiser": DenoiserTraining,
+    "guide": GuideTraining,
+    "text_head": TextHeadTraining,
+    "evaluator": EvaluatorTraining,
+    "actor": ActorTraining,
+    "motionclip": MotionClipTraining,
+    "motion3dgan": Motion3DGANTraining,
+    "lstm_filler": LSTMFillerTraining,
+    "deformer": DeformationTraining,
+    "au_regressor": AURegressorTraining,
+    "student": DistillationTraining,
 }

@@ -2,9 +2,10 @@
 (``training.train_all`` retrains them).
 
 ``SHIPPED[name] = (model, settings)``: the model's recipe (training.RECIPES) with these
-settings changed from its defaults (facelib/config.py).  tests/test_training.py checks
-that every shipped checkpoint is here and that its recorded settings are these, so
-``python -m facelib train all`` rebuilds exactly what is shipped.
+settings changed from its defaults (facelib/training/settings.py).
+tests/test_training.py checks that every shipped checkpoint is here and that its
+recorded settings are these, so ``python -m facelib train all`` rebuilds exactly what is
+shipped.
 """
 
 from __future__ import annotations
