@@ -31,7 +31,7 @@ from facelib.metrics import (
     resample_frames,
     temporal_roughness,
 )
-from facelib.config import DenoiserTraining
+from facelib.training import DenoiserTraining
 
 
 def motion(x):

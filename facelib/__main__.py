@@ -91,14 +91,16 @@ def _setting(model_name, assignment, settings_class=None):
             f"--set {assignment!r}: expected NAME=VALUE with NAME a setting of"
             f" {model_name} ({', '.join(known)})"
         )
-    kind = str(known[name].type)
-    if text.lower() == "none" and ("None" in kind or kind == "object"):
+    base, optional = cli_sample.field_type(
+        settings_class or training.SETTINGS[model_name], name
+    )
+    if text.lower() == "none" and (optional or base is object):
         return name, None
-    if "bool" in kind:
+    if base is bool:
         if text.lower() not in ("true", "false"):
             raise ValueError(f"--set {name}: true or false, got {text!r}")
         return name, text.lower() == "true"
-    if "tuple" in kind or kind == "object":
+    if base in (tuple, object):
         try:
             value = ast.literal_eval(text)
         except (ValueError, SyntaxError):
@@ -107,7 +109,7 @@ def _setting(model_name, assignment, settings_class=None):
             ) from None
         return name, tuple(value) if isinstance(value, list) else value
     try:
-        return name, cli_sample._converter(kind, name)(text)
+        return name, cli_sample._converter(base, optional, name)(text)
     except argparse.ArgumentTypeError as e:
         raise ValueError(
             f"--set {name}: {e}".replace(f"--{name.replace('_', '-')} ", "")

@@ -3,17 +3,18 @@ registry (:data:`TASKS`).
 
 Every option of a task is generated from a field of the task's settings dataclass
 (facelib/tasks/settings.py, whose defaults are the book's best measured settings;
-``--paper`` the paper's), with its help (:data:`FIELD_HELP`) and its default, so that
-the command line reaches every setting; only the fields in :data:`INTERNAL` (set from
-the input) have no option. A task's own inputs (``--label``, ``--input``, ...) are
-listed in its registry entry. Each output ``.npz`` records the settings used and the
-sha256 of every checkpoint loaded to make it.
+``--paper`` the paper's), with its help (the field's, ``tasks.settings.option``) and its
+default, so that the command line reaches every setting; only the fields in
+:data:`INTERNAL` (set from the input) have no option. A task's own inputs (``--label``,
+``--input``, ...) are listed in its registry entry. Each output ``.npz`` records the
+settings used and the sha256 of every checkpoint loaded to make it.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import typing
 import zipfile
 import zlib
 from dataclasses import asdict, dataclass, fields, replace
@@ -22,154 +23,11 @@ from typing import Callable
 
 import numpy as np
 
-from . import checkpoints, config, data, inpainting, tasks
+from . import checkpoints, config, inpainting, tasks
 from .face.sequences import MAX_FRAMES, MIN_FRAMES
+from .tasks.settings import option_text
 from .training.loop import device_for
 
-# one text per field name: a field means the same in every task's settings
-FIELD_HELP = {
-    "steps": "reverse steps, respaced from T = 2000 ('none': all T)",
-    "num_frames": "frames per sequence",
-    "seed": "the random seed (one random stream per chain)",
-    "dataset": "the data the networks were trained on",
-    "variance": (
-        "the DDPM sampler's sigma_t^2: beta_t (the paper's) or the posterior beta~_t"
-        " ('none': the denoiser's own; DDIM's is eta^2 beta~_t)"
-    ),
-    "spacing": (
-        "where a chain of K steps puts them: uniform (1, ..., T; the book's) or"
-        " trailing (T/K, ..., T; Lin et al. 2024)"
-    ),
-    "sampler": (
-        "the reverse step: DDPM's ancestral step (Eq. 5), DDIM's, a distilled"
-        " student's (--steps: one it was distilled for) or the rectified flow's"
-        " Euler step (chapter 14)"
-    ),
-    "eta": "DDIM's noise, in [0, 1] (0: deterministic)",
-    "join": (
-        "how windows join: fill (the shared frames known, with reconstruction"
-        " guidance), replace (Alg. 3 as printed), handshake (DoubleTake: all windows"
-        " at once, shared frames averaged), concat (independent windows), learned"
-        " (fill by a join denoiser, which reads the known frames)"
-    ),
-    "transition": "frames each window shares with the one before (at the native rate)",
-    "fps": "frames per second written",
-    "opening": (
-        "a label segment's first window is guided by the type-S classifier as this"
-        " order ('none': by the type-I classifier, as the segment's other windows)"
-    ),
-    "opening_lr": "Adagrad learning rate of a segment's first window",
-    "text_dataset": (
-        "the data of a schedule with a text: its denoiser and text head (labels read"
-        " as their raw text)"
-    ),
-    "text_opening": (
-        "a text segment's first window guided by its text said in this order ('from"
-        " the neutral face to ...'; 'none': as written)"
-    ),
-    "text_guidance_weight": (
-        "lambda of Alg. 2 for a schedule's texts ('none': text control's)"
-    ),
-    "text_lr": (
-        "Adagrad learning rate of a schedule's texts ('none': text control's for the"
-        " steps)"
-    ),
-    "feather": (
-        "shift the frames next to the known ones by the known ones' gap to the model's"
-        " estimate, a Gaussian's sigma in frames (0: Alg. 3 as printed)"
-    ),
-    "guide_continuation": (
-        "guide a segment's later windows by the type-I classifier too (default: they"
-        " continue unguided)"
-    ),
-    "guidance": (
-        "classifier: a noisy classifier steers the unconditional denoiser (the"
-        " paper's); cfg: classifier-free guidance of the label-conditional denoiser"
-        " denoiser_<dataset>_cfg"
-    ),
-    "classifier_type": (
-        "the guidance classifier's type: I = label (Alg. 1), S = label x N2E/E2N"
-    ),
-    "method": (
-        "classifier guidance by adagrad (Alg. 1's steps) or mean_shift ('none': adagrad"
-        " with the ddpm sampler, mean_shift with ddim)"
-    ),
-    "guidance_weight": "lambda of Alg. 1-2, the weight of log p_theta",
-    "lr": (
-        "Adagrad learning rate of the guidance ('none': the book's choice for the"
-        " dataset and the steps)"
-    ),
-    "scale": (
-        "the mean shift's gradient scale s, or CFG's weight w >= 0 ('none': the book's"
-        " choice)"
-    ),
-    "refine": "fixed-point iterations per inversion step (0: the plain DDIM inversion)",
-    "keep": (
-        "frames kept as given, as 0-based ranges ('0:1': the neutral frame of an N2E"
-        " sequence; 'none': every frame is regenerated)"
-    ),
-    "score": (
-        "what Alg. 2 climbs: the cosine of Eq. 10 or the text head's log-probability of"
-        " the text among the training descriptions"
-    ),
-    "head_input": "what the head reads: x_t (Alg. 2) or the denoiser's estimate x0_hat",
-    "vocabulary": (
-        "with --score contrastive: match the text against every description known, also"
-        " those no network has seen"
-    ),
-    "particles": (
-        "best-of-K: K guided chains per sequence, the head keeps one at the time label"
-        " --select-time"
-    ),
-    "select_time": "the time label where best-of-K picks",
-    "max_time": (
-        "leave the steps above this time label unguided ('none': guide every step)"
-    ),
-    "start": "the step of the paper's chain the decoder's sequence is re-noised to",
-    "reconstruction_scale": "reconstruction guidance zeta (0: none)",
-    "resample": "RePaint's resampling r (1: none)",
-    "order": (
-        "neutral face first (N2E) or last (E2N) ('none': N2E unless the label says)"
-    ),
-    "passes": "harmonising passes of Alg. 4",
-    "renoise_step": (
-        "the step a pass after the first re-noises to ('none': T, as Alg. 4)"
-    ),
-    "tolerance": "tau of log N(curve | R(x, t), tau^2), in intensity units",
-    "read": "what the AU regressor reads: x0_hat, the denoiser's estimate, or x_t",
-    "au_weight": "the weight of the AU score (0: AU guidance off)",
-}
-TASK_HELP = {
-    (
-        "keyframes",
-        "method",
-    ): "replace (Alg. 3 on coordinates), reconstruction (guidance) or both",
-    ("text", "guidance_weight"): (
-        "lambda of Alg. 2, the weight of log p_theta ('none': the book's choice "
-        "for the score)"
-    ),
-    ("geometry", "lr"): "Adagrad learning rate of the guidance",
-    ("au", "method"): "adagrad (Alg. 1's steps) or mean_shift",
-    ("au", "scale"): "the mean shift's gradient scale s",
-    ("au", "lr"): "Adagrad learning rate ('none': the book's choice for the steps)",
-}
-CHOICES = {
-    "variance": ("beta", "posterior"),
-    "sampler": config.SAMPLERS,
-    "spacing": config.SPACINGS,
-    "dataset": data.DATASET_NAMES,
-    "guidance": config.LABEL_GUIDANCE,
-    "classifier_type": data.CLASSIFIER_TYPES,
-    "method": config.GUIDANCE_METHODS,
-    "score": config.TEXT_SCORES,
-    "head_input": config.HEAD_INPUTS,
-    "read": config.HEAD_INPUTS,
-    "order": data.KIND_NAMES,
-    "join": config.JOIN_METHODS,
-    "opening": data.KIND_NAMES,
-    "text_opening": data.KIND_NAMES,
-}
-TASK_CHOICES = {("keyframes", "method"): config.KEYFRAME_METHODS}
 INPUT_LENGTH = ("fill", "edit")  # tasks whose sequences have the input's length
 # fields without an option: the input's length; a long sequence's windows have the
 # model's
@@ -543,12 +401,19 @@ def _default(task, name):
     )
 
 
-def _converter(kind, name):
-    """An argparse type for a field annotated ``kind`` ("int | None", "float", "str",
-    ...): 'none' is None where the field allows it; anything else must parse as the
-    field's type."""
-    base = int if "int" in kind else float if "float" in kind else str
-    optional = "None" in kind
+def field_type(cls, name):
+    """(type, optional) of the field ``name`` of the dataclass ``cls``, read from its
+    annotation: ``int | None`` -> (int, True), ``float`` -> (float, False)."""
+    hint = typing.get_type_hints(cls)[name]
+    args = [a for a in typing.get_args(hint) if a is not type(None)]
+    return (args[0] if args else hint), type(None) in typing.get_args(hint)
+
+
+def _converter(base, optional, name):
+    """An argparse type for a field of type ``base`` (int, float, str; ``optional``:
+    'none' is None); anything else must parse as the field's type."""
+    if base not in (int, float, str):
+        raise TypeError(f"no option type for a field of type {base!r}")
 
     def convert(text):
         if optional and text.lower() == "none":
@@ -568,21 +433,24 @@ def _converter(kind, name):
 
 def settings_options(parser, task):
     """An option per field of the task's settings (:data:`INTERNAL` ones excepted), its
-    help stating the default; an option not given leaves no attribute (``--x none`` sets
-    None where the field allows it).
+    help and choices those of the field (``tasks.settings.option``) and the help stating
+    the default; an option not given leaves no attribute (``--x none`` sets None where
+    the field allows it).
     """
-    group = parser.add_argument_group(
-        f"settings (tasks.{type(TASKS[task].settings).__name__})"
-    )
-    for f in fields(TASKS[task].settings):
+    cls = type(TASKS[task].settings)
+    group = parser.add_argument_group(f"settings (tasks.{cls.__name__})")
+    for f in fields(cls):
         if (task, f.name) in INTERNAL:
             continue
-        help = (
-            f"{TASK_HELP.get((task, f.name), FIELD_HELP[f.name])}"
-            f" ({_default(task, f.name)})"
-        )
+        text = option_text(cls, f.name, "help")
+        if text is None:
+            raise ValueError(
+                f"{cls.__name__}.{f.name} has no help (tasks.settings.option)"
+            )
+        help = f"{text} ({_default(task, f.name)})"
         flags = ["--" + f.name.replace("_", "-"), *ALIASES.get(f.name, ())]
-        if "bool" in str(f.type):
+        base, optional = field_type(cls, f.name)
+        if base is bool:
             group.add_argument(
                 *flags,
                 dest=f.name,
@@ -591,14 +459,14 @@ def settings_options(parser, task):
                 help=help,
             )
             continue
-        choices = TASK_CHOICES.get((task, f.name), CHOICES.get(f.name))
-        if choices is not None and "None" in str(f.type):
+        choices = option_text(cls, f.name, "choices")
+        if choices is not None and optional:
             choices = (*choices, None)
         group.add_argument(
             *flags,
             dest=f.name,
             default=argparse.SUPPRESS,
-            type=_converter(str(f.type), f.name),
+            type=_converter(base, optional, f.name),
             choices=choices,
             help=help,
             metavar=f.name.upper() if choices is None else None,

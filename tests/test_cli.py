@@ -335,7 +335,7 @@ def test_every_setting_of_a_task_is_an_option_with_its_help_and_default(task, ca
         assert option in text, f"sample {task}: no option for {f.name}"
         value = getattr(settings, f.name)
         assert f"default {'none' if value is None else value}" in text.split(option, 1)[1], (task, f.name)
-        help = cli_sample.TASK_HELP.get((task, f.name), cli_sample.FIELD_HELP[f.name])
+        help = tasks.settings.option_text(type(settings), f.name, "help")
         assert ("'none'" not in help) or "None" in str(f.type), f"sample {task} --{f.name}: 'none' is not allowed"
 
 
@@ -423,7 +423,7 @@ def test_every_settings_field_round_trips_through_its_option(task):
     if spec.in_paper:
         cases.append((spec.settings.paper(), [], ["--paper"]))
     for name in names:
-        choices = cli_sample.TASK_CHOICES.get((task, name), cli_sample.CHOICES.get(name))
+        choices = tasks.settings.option_text(type(spec.settings), name, "choices")
         cases += [(s, [name], []) for s in _alternatives(spec.settings, name, choices)]
     if task == "text":  # the vocabulary is matched by the contrastive score only
         cases.append((dataclasses.replace(spec.settings, score="contrastive", vocabulary=True),

@@ -6,12 +6,13 @@ settings' ``paper()`` gives the paper's printed algorithm (``--paper``) and ``fa
 few steps (tests, FACELIB_FAST chapters).  ``steps``: reverse steps of a chain respaced
 from the paper's T = 2000 (None: all 2000).  The constants the defaults come from, with
 their sources, are in facelib/config.py; the command line's ``sample TASK`` options are
-these fields (facelib/cli_sample.py).
+these fields (facelib/cli_sample.py), each with the help and choices written once in
+its :func:`option`.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, fields, is_dataclass, replace
 
 from ..checks import (
     check_choice,
@@ -56,6 +57,38 @@ from ..config import (
     TEXT_LR_REFERENCE_STEPS,
     TEXT_SCORES,
 )
+from ..data import CLASSIFIER_TYPES, DATASET_NAMES, KIND_NAMES
+
+
+def option(default, help=None, choices=None):
+    """A settings field with the text of its command-line option and, where it has
+    them, its choices: the one place either is written.  A field of the same name in
+    another task's settings, written without them, has the same help and choices (a
+    field means the same in every task; :func:`option_text`)."""
+    given = (("help", help), ("choices", choices))
+    return field(default=default, metadata={k: v for k, v in given if v is not None})
+
+
+def option_text(cls, name, key):
+    """The ``key`` ("help" or "choices") of the field ``name`` of the settings class
+    ``cls``: its own or its bases', else that of the first settings class of this
+    module that gives one for a field of that name; None if none does."""
+    if name not in {f.name for f in fields(cls)}:
+        raise ValueError(f"{cls.__name__} has no setting {name!r}")
+    for klass in (*cls.__mro__, *_settings_classes()):
+        found = getattr(klass, "__dataclass_fields__", {}).get(name)
+        if found is not None and key in found.metadata:
+            return found.metadata[key]
+    return None
+
+
+def _settings_classes():
+    """Every settings class of this module, in the order they are written."""
+    return [
+        c
+        for c in globals().values()
+        if isinstance(c, type) and is_dataclass(c) and c.__module__ == __name__
+    ]
 
 
 def step_scaled_lr(
@@ -126,19 +159,42 @@ class Sampling:
     """What every sampling task shares: the chain's length, the sequences' length, the
     seed."""
 
-    steps: int | None = None
-    num_frames: int = NUM_FRAMES  # paper §4: 40 frames
-    seed: int = 0
-    # the sampler's sigma_t^2: "beta" (paper §4), "posterior" (beta~_t); None: the
-    # model's
-    variance: str | None = None
-    # one of SAMPLERS
-    sampler: str = "ddpm"
-    # DDIM only: sigma_t^2 = eta^2 beta~_t, in [0, 1] (0: deterministic; 1: the DDPM
-    # posterior)
-    eta: float = 0.0
-    # one of SPACINGS
-    spacing: str = "uniform"
+    steps: int | None = option(
+        None,
+        "reverse steps, respaced from T = 2000 ('none': all T)",
+    )
+    # paper §4: 40 frames
+    num_frames: int = option(
+        NUM_FRAMES,
+        "frames per sequence",
+    )
+    seed: int = option(
+        0,
+        "the random seed (one random stream per chain)",
+    )
+    variance: str | None = option(
+        None,
+        "the DDPM sampler's sigma_t^2: beta_t (the paper's) or the posterior beta~_t"
+        " ('none': the denoiser's own; DDIM's is eta^2 beta~_t)",
+        choices=("beta", "posterior"),
+    )
+    sampler: str = option(
+        "ddpm",
+        "the reverse step: DDPM's ancestral step (Eq. 5), DDIM's, a distilled"
+        " student's (--steps: one it was distilled for) or the rectified flow's Euler"
+        " step (chapter 14)",
+        choices=SAMPLERS,
+    )
+    eta: float = option(
+        0.0,
+        "DDIM's noise, in [0, 1] (0: deterministic)",
+    )
+    spacing: str = option(
+        "uniform",
+        "where a chain of K steps puts them: uniform (1, ..., T; the book's) or"
+        " trailing (T/K, ..., T; Lin et al. 2024)",
+        choices=SPACINGS,
+    )
 
     def __post_init__(self):
         if self.variance is not None:
@@ -190,7 +246,12 @@ class Sampling:
 class Unconditional(Sampling):
     # results/sampling_respacing.json: 500 steps change none of the denoiser's measures
     steps: int | None = 500
-    dataset: str = "coma"  # the denoiser denoiser_<dataset>
+    # the denoiser denoiser_<dataset>
+    dataset: str = option(
+        "coma",
+        "the data the networks were trained on",
+        choices=DATASET_NAMES,
+    )
 
 
 @dataclass(frozen=True)
@@ -203,16 +264,39 @@ class LabelControl(Sampling):
     steps: int | None = 200
     dataset: str = "coma"
     # the paper's; "cfg": classifier-free (the denoiser denoiser_<dataset>_cfg)
-    guidance: str = "classifier"
-    classifier_type: str = "I"  # paper §5.1: type I (label) for Alg. 1
-    # classifier guidance by "adagrad" (Alg. 1) or "mean_shift" (Dhariwal & Nichol's);
-    # None: the one measured best with the sampler (guidance_method)
-    method: str | None = None
-    guidance_weight: float = GUIDANCE_WEIGHT
-    # None: ADAGRAD_LR of the dataset, scaled to the steps (tasks.adagrad_lr)
-    lr: float | None = None
-    # the mean shift's s or CFG's w; None: default_mean_shift_scale or CFG_SCALE
-    scale: float | None = None
+    guidance: str = option(
+        "classifier",
+        "classifier: a noisy classifier steers the unconditional denoiser (the"
+        " paper's); cfg: classifier-free guidance of the label-conditional denoiser"
+        " denoiser_<dataset>_cfg",
+        choices=LABEL_GUIDANCE,
+    )
+    # paper §5.1: type I (label) for Alg. 1
+    classifier_type: str = option(
+        "I",
+        "the guidance classifier's type: I = label (Alg. 1), S = label x N2E/E2N",
+        choices=CLASSIFIER_TYPES,
+    )
+    method: str | None = option(
+        None,
+        "classifier guidance by adagrad (Alg. 1's steps) or mean_shift ('none':"
+        " adagrad with the ddpm sampler, mean_shift with ddim)",
+        choices=GUIDANCE_METHODS,
+    )
+    guidance_weight: float = option(
+        GUIDANCE_WEIGHT,
+        "lambda of Alg. 1-2, the weight of log p_theta",
+    )
+    lr: float | None = option(
+        None,
+        "Adagrad learning rate of the guidance ('none': the book's choice for the"
+        " dataset and the steps)",
+    )
+    scale: float | None = option(
+        None,
+        "the mean shift's gradient scale s, or CFG's weight w >= 0 ('none': the book's"
+        " choice)",
+    )
     # a class constant, not a field (Edit has its own)
     default_mean_shift_scale = MEAN_SHIFT_SCALE
 
@@ -268,11 +352,18 @@ class Edit(LabelControl):
     eta: float = 0.0
     # fixed-point iterations per inversion step (GaussianDiffusion.invert): 3 network
     # calls per step
-    refine: int = 2
+    refine: int = option(
+        2,
+        "fixed-point iterations per inversion step (0: the plain DDIM inversion)",
+    )
     # frames returned as given, 0-based ranges: the neutral frame of an N2E sequence,
     # which an edit would otherwise move (issue 42: 2.45 mm on a test sequence); None:
     # every frame regenerated
-    keep: str | None = "0:1"
+    keep: str | None = option(
+        "0:1",
+        "frames kept as given, as 0-based ranges ('0:1': the neutral frame of an N2E"
+        " sequence; 'none': every frame is regenerated)",
+    )
     default_mean_shift_scale = EDIT_MEAN_SHIFT_SCALE
 
     def __post_init__(self):
@@ -302,19 +393,43 @@ class TextControl(Sampling):
     steps: int | None = 100
     dataset: str = TEXT_DATASET
     # Eq. 10 (the text-control chapter compares the contrastive score)
-    score: str = "cosine"
-    head_input: str = "x_t"  # Alg. 2 (x0_hat: not in the paper)
-    # contrastive score only: match the text against every known description
-    vocabulary: bool = False
-    # None: TEXT_GUIDANCE_WEIGHT, CONTRASTIVE_GUIDANCE_WEIGHT for "contrastive"
-    guidance_weight: float | None = None
-    # None: TEXT_LR (CONTRASTIVE_LR), scaled to the steps (tasks.text_lr)
+    score: str = option(
+        "cosine",
+        "what Alg. 2 climbs: the cosine of Eq. 10 or the text head's log-probability"
+        " of the text among the training descriptions",
+        choices=TEXT_SCORES,
+    )
+    # Alg. 2 (x0_hat: not in the paper)
+    head_input: str = option(
+        "x_t",
+        "what the head reads: x_t (Alg. 2) or the denoiser's estimate x0_hat",
+        choices=HEAD_INPUTS,
+    )
+    vocabulary: bool = option(
+        False,
+        "with --score contrastive: match the text against every description known,"
+        " also those no network has seen",
+    )
+    guidance_weight: float | None = option(
+        None,
+        "lambda of Alg. 2, the weight of log p_theta ('none': the book's choice for"
+        " the score)",
+    )
     lr: float | None = None
     # best-of-K: K guided chains per sequence until SELECT_TIME (1: Alg. 2 as written)
-    particles: int = 1
-    select_time: float = SELECT_TIME
-    # leave the steps above this time label unguided (None: guide all)
-    max_time: float | None = None
+    particles: int = option(
+        1,
+        "best-of-K: K guided chains per sequence, the head keeps one at the time label"
+        " --select-time",
+    )
+    select_time: float = option(
+        SELECT_TIME,
+        "the time label where best-of-K picks",
+    )
+    max_time: float | None = option(
+        None,
+        "leave the steps above this time label unguided ('none': guide every step)",
+    )
 
     def __post_init__(self):
         super().__post_init__()
@@ -369,19 +484,37 @@ class AUControl(Sampling):
     # the unconditional denoiser denoiser_<dataset> and the regressor
     # au_regressor_<dataset>
     dataset: str = "coma"
-    method: str = "adagrad"  # "adagrad" (Alg. 1's optimisation) or "mean_shift"
+    method: str = option(
+        "adagrad",
+        "adagrad (Alg. 1's steps) or mean_shift",
+    )
     guidance_weight: float = GUIDANCE_WEIGHT  # lambda (Alg. 1's)
-    # None: AU_CURVE_LR at 50 steps, scaled to the steps as label control's rate
-    lr: float | None = None
-    scale: float = MEAN_SHIFT_SCALE  # the mean shift's s
-    tolerance: float = AU_CURVE_TOLERANCE
-    # what R reads: "x0_hat", the denoiser's estimate (the fine-control chapter), or
-    # "x_t"
-    read: str = "x0_hat"
-    # with a given face: joins the frames to it (as Alg. 4's)
-    reconstruction_scale: float = RECONSTRUCTION_SCALE
+    lr: float | None = option(
+        None,
+        "Adagrad learning rate ('none': the book's choice for the steps)",
+    )
+    scale: float = option(
+        MEAN_SHIFT_SCALE,
+        "the mean shift's gradient scale s",
+    )
+    tolerance: float = option(
+        AU_CURVE_TOLERANCE,
+        "tau of log N(curve | R(x, t), tau^2), in intensity units",
+    )
+    read: str = option(
+        "x0_hat",
+        "what the AU regressor reads: x0_hat, the denoiser's estimate, or x_t",
+        choices=HEAD_INPUTS,
+    )
+    reconstruction_scale: float = option(
+        RECONSTRUCTION_SCALE,
+        "reconstruction guidance zeta (0: none)",
+    )
     # the weight of log N(c | R, tau^2); 0: "AU guidance off" (tasks.au.AU_GUIDANCE_OFF)
-    au_weight: float = 1.0
+    au_weight: float = option(
+        1.0,
+        "the weight of the AU score (0: AU guidance off)",
+    )
 
     def __post_init__(self):
         super().__post_init__()
@@ -411,7 +544,10 @@ class DecoderThenDiffusion(Sampling):
     # the text-control chapter measures it on the chain of text control
     steps: int | None = 100
     dataset: str = TEXT_DATASET
-    start: int = DECODER_START  # a step of the paper's chain, 1..T
+    start: int = option(
+        DECODER_START,
+        "the step of the paper's chain the decoder's sequence is re-noised to",
+    )
 
     def __post_init__(self):
         super().__post_init__()
@@ -435,7 +571,10 @@ class Fill(Sampling):
     reconstruction_scale: float = RECONSTRUCTION_SCALE
     # RePaint's r: r = 2 joins more seams (89 %) but reads the label less (82.8 %), in
     # twice the time
-    resample: int = 1
+    resample: int = option(
+        1,
+        "RePaint's resampling r (1: none)",
+    )
 
     def __post_init__(self):
         super().__post_init__()
@@ -457,11 +596,19 @@ class Keyframes(Sampling):
     steps: int | None = 100  # the filling chapter's chain (Fill)
     variance: str | None = "posterior"
     dataset: str = "coma"
-    method: str = "both"
+    method: str = option(
+        "both",
+        "replace (Alg. 3 on coordinates), reconstruction (guidance) or both",
+        choices=KEYFRAME_METHODS,
+    )
     reconstruction_scale: float = RECONSTRUCTION_SCALE
     # the keyed landmark's other frames shifted by the key's gap to the model's estimate
     # (frames, sigma; 0: Alg. 3 as printed; inpainting.KnownFrames)
-    feather: float = KEYFRAME_FEATHER
+    feather: float = option(
+        KEYFRAME_FEATHER,
+        "shift the frames next to the known ones by the known ones' gap to the model's"
+        " estimate, a Gaussian's sigma in frames (0: Alg. 3 as printed)",
+    )
 
     def __post_init__(self):
         super().__post_init__()
@@ -484,21 +631,45 @@ class Long(Sampling):
     steps: int | None = 100  # the filling chapter's chain (Fill)
     variance: str | None = "posterior"
     dataset: str = "coma"
-    join: str = "fill"
-    transition: int = 10  # frames each window shares with the one before (native)
-    fps: int = NATIVE_FPS  # the frame rate written (resampled from NATIVE_FPS)
+    join: str = option(
+        "fill",
+        "how windows join: fill (the shared frames known, with reconstruction"
+        " guidance), replace (Alg. 3 as printed), handshake (DoubleTake: all windows"
+        " at once, shared frames averaged), concat (independent windows), learned"
+        " (fill by a join denoiser, which reads the known frames)",
+        choices=JOIN_METHODS,
+    )
+    transition: int = option(
+        10,
+        "frames each window shares with the one before (at the native rate)",
+    )
+    fps: int = option(
+        NATIVE_FPS,
+        "frames per second written",
+    )
     reconstruction_scale: float = RECONSTRUCTION_SCALE
     guidance_weight: float = GUIDANCE_WEIGHT
-    # None: ADAGRAD_LR of the dataset, scaled to the steps (tasks.adagrad_lr)
     lr: float | None = None
     # a label segment's first window sets out from where the stream is: guided by the
     # type-S classifier as this order, at this rate (None: type I, as its other windows)
-    opening: str | None = "N2E"
-    opening_lr: float = GEOMETRY_LR
+    opening: str | None = option(
+        "N2E",
+        "a label segment's first window is guided by the type-S classifier as this"
+        " order ('none': by the type-I classifier, as the segment's other windows)",
+        choices=KIND_NAMES,
+    )
+    opening_lr: float = option(
+        GEOMETRY_LR,
+        "Adagrad learning rate of a segment's first window",
+    )
     # a segment's later windows guided by the type-I classifier too (False: they
     # continue what the first set out, unguided; guided again, a label escalates: an
     # open mouth opens further in every window, chapter 15)
-    guide_continuation: bool = False
+    guide_continuation: bool = option(
+        False,
+        "guide a segment's later windows by the type-I classifier too (default: they"
+        " continue unguided)",
+    )
     # the new frames next to the known ones shifted by their gap to the model's estimate
     # (frames, sigma; 0: none; inpainting.KnownFrames; it does not remove the joins'
     # kink, chapter 15)
@@ -506,14 +677,29 @@ class Long(Sampling):
     # a schedule with a text ("'a broad grin':2s") runs on the text head's data: its
     # denoiser, and Alg. 2 for every segment, a label read as its raw text (no label
     # classifier is trained on it)
-    text_dataset: str = TEXT_DATASET
+    text_dataset: str = option(
+        TEXT_DATASET,
+        "the data of a schedule with a text: its denoiser and text head (labels read"
+        " as their raw text)",
+    )
     # a text segment's first window guided by its text said in this order ("from the
     # neutral face to ..."; None: as written, which shows the text more often, chapter
     # 15)
-    text_opening: str | None = None
-    # lambda and the Adagrad rate of the text segments (None: text control's)
-    text_guidance_weight: float | None = None
-    text_lr: float | None = None
+    text_opening: str | None = option(
+        None,
+        "a text segment's first window guided by its text said in this order ('from"
+        " the neutral face to ...'; 'none': as written)",
+        choices=KIND_NAMES,
+    )
+    text_guidance_weight: float | None = option(
+        None,
+        "lambda of Alg. 2 for a schedule's texts ('none': text control's)",
+    )
+    text_lr: float | None = option(
+        None,
+        "Adagrad learning rate of a schedule's texts ('none': text control's for the"
+        " steps)",
+    )
 
     def __post_init__(self):
         super().__post_init__()
@@ -572,18 +758,29 @@ class GeometryAdaptive(Sampling):
     # the geometry-adaptive and end-to-end chapters: the respaced chain of `animate`
     steps: int | None = 100
     dataset: str = "coma"
-    # the neutral face first ("N2E", the default) or last ("E2N"), unless the label says
-    order: str | None = None
+    order: str | None = option(
+        None,
+        "neutral face first (N2E) or last (E2N) ('none': N2E unless the label says)",
+        choices=KIND_NAMES,
+    )
     # the geometry-adaptive chapter: the harmonising passes of Alg. 4 add nothing
     # measurable
-    passes: int = 1
-    # pass i > 1 re-noises to this step (None: to T, as the paper)
-    renoise_step: int | None = None
+    passes: int = option(
+        1,
+        "harmonising passes of Alg. 4",
+    )
+    renoise_step: int | None = option(
+        None,
+        "the step a pass after the first re-noises to ('none': T, as Alg. 4)",
+    )
     resample: int = 1  # RePaint's r within each pass (1: Alg. 4 as written)
     # the sweep of zeta (geometry-adaptive chapter)
     reconstruction_scale: float = RECONSTRUCTION_SCALE
     guidance_weight: float = GUIDANCE_WEIGHT
-    lr: float = GEOMETRY_LR
+    lr: float = option(
+        GEOMETRY_LR,
+        "Adagrad learning rate of the guidance",
+    )
 
     def __post_init__(self):
         super().__post_init__()
