@@ -97,14 +97,15 @@ def check_flag(name, value):
         raise ValueError(f"{name} must be True or False, got {value!r}")
 
 
-def with_overrides(settings, overrides):
+def with_overrides(settings, overrides, name=None):
     """The dataclass ``settings`` with the fields named in ``overrides`` changed (a
-    clear error for a name it has not)."""
+    clear error for a name it has not, calling the settings ``name``: their class's
+    name by default)."""
     allowed = [f.name for f in fields(settings)]
     unknown = sorted(set(overrides) - set(allowed))
     if unknown:
         raise ValueError(
-            f"{type(settings).__name__} has no setting {', '.join(unknown)}; its"
-            f" settings: {', '.join(allowed)}"
+            f"{name or type(settings).__name__} has no setting {', '.join(unknown)};"
+            f" its settings: {', '.join(allowed)}"
         )
     return replace(settings, **overrides)

@@ -16,10 +16,11 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import asdict, fields, replace
+from dataclasses import asdict
 from pathlib import Path
 
 from ..checkpoints import check_world, checkpoint_paths, save_checkpoint
+from ..checks import with_overrides
 from .loop import Draws, TrainingLog, fit, is_main_process
 from .recipes import (
     RECIPES,
@@ -113,16 +114,8 @@ def settings_for(model_name, fast=False, **settings):
     steps, for tests and FACELIB_FAST chapters)."""
     if model_name not in RECIPES:
         raise ValueError(f"unknown model {model_name!r}; allowed: {', '.join(RECIPES)}")
-    defaults = SETTINGS[model_name]()
-    allowed = [f.name for f in fields(defaults)]
-    unknown = sorted(set(settings) - set(allowed))
-    if unknown:
-        raise ValueError(
-            f"{model_name} has no setting {', '.join(unknown)}; its settings:"
-            f" {', '.join(allowed)}"
-        )
-    steps = settings.pop("steps", None)
-    chosen = replace(defaults, **settings)
+    steps = settings.pop("steps", None)  # a field of every recipe's settings
+    chosen = with_overrides(SETTINGS[model_name](), settings, name=model_name)
     if steps is not None:
         if chosen.epochs is not None:
             raise ValueError(
