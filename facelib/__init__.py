@@ -7,6 +7,8 @@ The map of the package, bottom to top.  A module imports only from the layers be
 0. ``config``: paths, the world, the datasets, and the constants several modules read
    (paper value or our choice).  ``checks``: the checks every setting shares (a
    choice, a number, an integer, a probability).  ``files``: the atomic write.
+   ``options``: a setting's command-line option (help, choices, type), written once
+   on its field.
 1. ``face``: the synthetic face world: template, identities, action units,
    expressions, sequences.  ``metrics``: accuracy, FID, diversity, seams, bootstrap
    intervals.  ``srvf``: square-root velocity.  ``chapters``: run one chapter notebook
@@ -50,6 +52,7 @@ LAYERS = {
     "config": 0,
     "checks": 0,
     "files": 0,
+    "options": 0,
     "face": 1,
     "metrics": 1,
     "srvf": 1,
@@ -97,6 +100,7 @@ __all__ = [
     "evaluation",
     "face",
     "files",
+    "options",
     "flow",
     "guidance",
     "inpainting",

@@ -23,6 +23,7 @@ from . import (
     config,
     data,
     meshio,
+    options,
     pipeline,
     registration,
     results,
@@ -74,6 +75,42 @@ def _data(args):
 
 
 TRAINABLE = tuple(training.RECIPES)  # every recipe is trainable
+# the recipes' settings that `train` has an option for (the rest: --set NAME=VALUE)
+RECIPE_OPTIONS = (
+    "dataset",
+    "classifier_type",
+    "method",
+    "split",
+    "steps",
+    "batch_size",
+    "seed",
+    "conditional",
+)
+
+
+def recipe_options(parser):
+    """`train`'s option of each of :data:`RECIPE_OPTIONS`, made from the recipes'
+    settings field (options.add_option): its help and choices, and the defaults of
+    the recipes that have it."""
+    group = parser.add_argument_group("settings of the recipe (training/settings.py)")
+    family = list(training.SETTINGS.values())
+    for name in RECIPE_OPTIONS:
+        having = {m: c for m, c in training.SETTINGS.items() if name in _field_names(c)}
+        by_value = {}
+        for model, cls in having.items():
+            value = cli_sample._show(getattr(cls(), name))
+            if name == "steps" and cls().epochs is not None:
+                value = f"{cls().epochs} epochs, not steps,"
+            by_value.setdefault(value, []).append(model)
+        default = "default: the recipe's: " + "; ".join(
+            f"{value} for {', '.join(models) if len(models) < len(family) else 'all'}"
+            for value, models in by_value.items()
+        )
+        options.add_option(group, next(iter(having.values())), name, default, family)
+
+
+def _field_names(cls):
+    return {f.name for f in dataclasses.fields(cls)}
 
 
 def _setting(model_name, assignment, settings_class=None):
@@ -91,7 +128,7 @@ def _setting(model_name, assignment, settings_class=None):
             f"--set {assignment!r}: expected NAME=VALUE with NAME a setting of"
             f" {model_name} ({', '.join(known)})"
         )
-    base, optional = cli_sample.field_type(
+    base, optional = options.field_type(
         settings_class or training.SETTINGS[model_name], name
     )
     if text.lower() == "none" and (optional or base is object):
@@ -109,20 +146,42 @@ def _setting(model_name, assignment, settings_class=None):
             ) from None
         return name, tuple(value) if isinstance(value, list) else value
     try:
-        return name, cli_sample._converter(base, optional, name)(text)
+        return name, options.converter(base, optional, name)(text)
     except argparse.ArgumentTypeError as e:
         raise ValueError(
             f"--set {name}: {e}".replace(f"--{name.replace('_', '-')} ", "")
         ) from None
 
 
-def _train(args):
+def train_settings(args):
+    """The settings `train NAME` trains with: the recipe's defaults (``--fast``: its
+    fast-mode ones) changed by its options and every --set NAME=VALUE."""
+    given = {n: getattr(args, n) for n in RECIPE_OPTIONS if hasattr(args, n)}
+    if args.variable_length:
+        given["num_frames"] = (35, 45)
     if args.name == "all":
-        if args.set:
+        if given or args.set:
             raise ValueError(
-                "--set changes one recipe's settings; train all trains the shipped ones"
-                " as they are"
+                "train all trains the shipped checkpoints with their recipes; the"
+                " settings options and --set change one recipe's (train NAME)"
             )
+        return None
+    if args.only or args.missing:
+        raise ValueError(f"--only and --missing pick checkpoints of train all, not of {args.name}")
+    for assignment in args.set:
+        name, value = _setting(args.name, assignment)
+        if name in given:
+            raise ValueError(
+                f"--set {name} repeats a setting given by its own option or an earlier"
+                " --set"
+            )
+        given[name] = value
+    return training.settings_for(args.name, fast=args.fast, **given)
+
+
+def _train(args):
+    settings = train_settings(args)
+    if args.name == "all":
         rows = training.train_all(
             args.only,
             fast=args.fast,
@@ -133,30 +192,12 @@ def _train(args):
         if args.out is None and not args.fast and rows:
             results.store_training_times()  # results/train_all.json
         return 0
-    given = {
-        "dataset": args.dataset,
-        "classifier_type": args.type,
-        "method": args.method,
-        "split": args.split,
-        "steps": args.steps,
-        "batch_size": args.batch_size,
-        "seed": args.seed,
-        "num_frames": (35, 45) if args.variable_length else None,
-        "conditional": args.conditional or None,
-    }
-    given = {k: v for k, v in given.items() if v is not None}
-    for assignment in args.set:
-        name, value = _setting(args.name, assignment)
-        if name in given:
-            raise ValueError(
-                f"--set {name} repeats a setting given by its own option or an earlier"
-                " --set"
-            )
-        given[name] = value
-    recipe = training.recipe(args.name, fast=args.fast, **given)
     t0 = time.perf_counter()
     written = training.train_and_save(
-        recipe, name=args.out, device=args.device, resume=args.resume
+        training.RECIPES[args.name](settings),
+        name=args.out,
+        device=args.device,
+        resume=args.resume,
     )
     if written:
         print(
@@ -180,16 +221,16 @@ def _neutral(args):
 def _registration_settings(args):
     """registration.Registration with --units and every --set NAME=VALUE of `register`
     and `animate`."""
-    given = {}
+    given = {"units": args.units} if hasattr(args, "units") else {}
     for assignment in args.set:
         name, value = _setting("registration", assignment, registration.Registration)
-        if name in given or name == "units":
+        if name in given:
             raise ValueError(
                 f"--set {name} repeats a setting given by its own option (--units) or"
                 " an earlier --set"
             )
         given[name] = value
-    return dataclasses.replace(registration.Registration(), units=args.units, **given)
+    return dataclasses.replace(registration.Registration(), **given)
 
 
 # `animate --schedule`'s GIF: every k-th frame, at most this rate (GIF frame times are
@@ -448,56 +489,17 @@ def build_parser():
             " prediction=u"
         ),
     )
-    p.add_argument(
-        "--dataset",
-        default=None,
-        choices=list(data.DATASET_NAMES),
-        help=(
-            "default: the recipe's (coma; coma+bu for text_head and motionclip, as"
-            " §5.2)"
-        ),
-    )
-    p.add_argument(
-        "--type",
-        default=None,
-        choices=list(data.CLASSIFIER_TYPES),
-        help="guide, evaluator: I = label, S = label x N2E/E2N (default I)",
-    )
+    recipe_options(p)
     p.add_argument(
         "--variable-length",
         action="store_true",
-        help="denoiser: train on lengths 35-45 (paper App. A)",
-    )
-    p.add_argument(
-        "--method",
-        default=None,
-        choices=["ours", "no_attention", "s2d", "coma", "linear"],
-        help="deformer: a row of Table 5 (default ours)",
-    )
-    p.add_argument(
-        "--split",
-        default=None,
-        choices=["identity", "expression"],
-        help="deformer: 3 subjects or 3 expressions held out, as §6 (default identity)",
-    )
-    p.add_argument(
-        "--steps",
-        type=int,
-        default=None,
-        help="training steps (default: the recipe's, facelib/training/settings.py)",
-    )
-    p.add_argument(
-        "--batch-size",
-        type=int,
-        default=None,
-        help="global batch, split over the processes (default: the recipe's)",
+        help="denoiser: train on lengths 35-45 (paper App. A; num_frames=(35, 45))",
     )
     p.add_argument(
         "--fast",
         action="store_true",
         help="the recipe's fast-mode settings (a few steps, for tests)",
     )
-    p.add_argument("--seed", type=int, default=None, help="default: the recipe's (0)")
     p.add_argument(
         "--device",
         default=None,
@@ -510,15 +512,6 @@ def build_parser():
         help=(
             "continue from <out>.state.pt if a run left one "
             "(the state is written every 500 steps; train all: each checkpoint's)"
-        ),
-    )
-    p.add_argument(
-        "--conditional",
-        action="store_true",
-        help=(
-            "denoiser: label-conditional, for classifier-free guidance (labels dropped"
-            " with probability training.DenoiserTraining.condition_dropout; checkpoint"
-            " denoiser_<dataset>_cfg)"
         ),
     )
     p.add_argument(
@@ -589,11 +582,8 @@ def build_parser():
             " `neutral`) is animated as it is"
         ),
     )
-    p.add_argument(
-        "--units",
-        default=None,
-        choices=list(registration.UNITS),
-        help="the mesh's units (default: detected from its size)",
+    options.add_option(
+        p, registration.Registration, "units", "default: detected from its size"
     )
     p.add_argument(
         "--keep-template",
@@ -640,12 +630,14 @@ def build_parser():
             f"{config.LONG_FPS_RANGE[1]})"
         ),
     )
-    p.add_argument(
-        "--order",
-        default=None,
-        choices=["N2E", "E2N"],
-        help="--label: neutral face first (N2E, the default) or last (E2N)",
+    options.add_option(
+        p,
+        tasks.GeometryAdaptive,
+        "order",
+        "--label only; default: N2E",
+        tasks.settings.settings_classes(),
     )
+    p.set_defaults(order=None)
     p.add_argument(
         "--steps",
         type=int,
@@ -683,11 +675,8 @@ def build_parser():
     p.add_argument(
         "--mesh", required=True, help="a neutral face mesh: OBJ, PLY, STL or OFF"
     )
-    p.add_argument(
-        "--units",
-        default=None,
-        choices=list(registration.UNITS),
-        help="the mesh's units (default: detected from its size)",
+    options.add_option(
+        p, registration.Registration, "units", "default: detected from its size"
     )
     p.add_argument(
         "--out",

@@ -3,7 +3,7 @@ registry (:data:`TASKS`).
 
 Every option of a task is generated from a field of the task's settings dataclass
 (facelib/tasks/settings.py, whose defaults are the book's best measured settings;
-``--paper`` the paper's), with its help (the field's, ``tasks.settings.option``) and its
+``--paper`` the paper's), with its help (the field's, ``options.option``) and its
 default, so that the command line reaches every setting; only the fields in
 :data:`INTERNAL` (set from the input) have no option. A task's own inputs (``--label``,
 ``--input``, ...) are listed in its registry entry. Each output ``.npz`` records the
@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import typing
 import zipfile
 import zlib
 from dataclasses import asdict, dataclass, fields, replace
@@ -25,7 +24,7 @@ import numpy as np
 
 from . import checkpoints, config, inpainting, tasks
 from .face.sequences import MAX_FRAMES, MIN_FRAMES
-from .tasks.settings import option_text
+from .options import add_option
 from .training.loop import device_for
 
 INPUT_LENGTH = ("fill", "edit")  # tasks whose sequences have the input's length
@@ -401,76 +400,24 @@ def _default(task, name):
     )
 
 
-def field_type(cls, name):
-    """(type, optional) of the field ``name`` of the dataclass ``cls``, read from its
-    annotation: ``int | None`` -> (int, True), ``float`` -> (float, False)."""
-    hint = typing.get_type_hints(cls)[name]
-    args = [a for a in typing.get_args(hint) if a is not type(None)]
-    return (args[0] if args else hint), type(None) in typing.get_args(hint)
-
-
-def _converter(base, optional, name):
-    """An argparse type for a field of type ``base`` (int, float, str; ``optional``:
-    'none' is None); anything else must parse as the field's type."""
-    if base not in (int, float, str):
-        raise TypeError(f"no option type for a field of type {base!r}")
-
-    def convert(text):
-        if optional and text.lower() == "none":
-            return None
-        try:
-            return base(text)
-        except ValueError:
-            what = "text" if base is str else base.__name__
-            raise argparse.ArgumentTypeError(
-                f"--{name.replace('_', '-')} must be {what}"
-                f"{' or none' if optional else ''}, got {text!r}"
-            ) from None
-
-    convert.__name__ = base.__name__
-    return convert
-
-
 def settings_options(parser, task):
     """An option per field of the task's settings (:data:`INTERNAL` ones excepted), its
-    help and choices those of the field (``tasks.settings.option``) and the help stating
+    help and choices those of the field (``options.option``) and the help stating
     the default; an option not given leaves no attribute (``--x none`` sets None where
     the field allows it).
     """
     cls = type(TASKS[task].settings)
     group = parser.add_argument_group(f"settings (tasks.{cls.__name__})")
     for f in fields(cls):
-        if (task, f.name) in INTERNAL:
-            continue
-        text = option_text(cls, f.name, "help")
-        if text is None:
-            raise ValueError(
-                f"{cls.__name__}.{f.name} has no help (tasks.settings.option)"
+        if (task, f.name) not in INTERNAL:
+            add_option(
+                group,
+                cls,
+                f.name,
+                _default(task, f.name),
+                family=tasks.settings.settings_classes(),
+                aliases=ALIASES.get(f.name, ()),
             )
-        help = f"{text} ({_default(task, f.name)})"
-        flags = ["--" + f.name.replace("_", "-"), *ALIASES.get(f.name, ())]
-        base, optional = field_type(cls, f.name)
-        if base is bool:
-            group.add_argument(
-                *flags,
-                dest=f.name,
-                default=argparse.SUPPRESS,
-                action=argparse.BooleanOptionalAction,
-                help=help,
-            )
-            continue
-        choices = option_text(cls, f.name, "choices")
-        if choices is not None and optional:
-            choices = (*choices, None)
-        group.add_argument(
-            *flags,
-            dest=f.name,
-            default=argparse.SUPPRESS,
-            type=_converter(base, optional, f.name),
-            choices=choices,
-            help=help,
-            metavar=f.name.upper() if choices is None else None,
-        )
 
 
 def add_task_parser(parsers, task, io, name=None, note=""):

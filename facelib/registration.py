@@ -35,6 +35,7 @@ from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 from . import config
+from .options import option
 from .checks import check_choice, check_positive_int
 from .face import identity
 from .face import template as tpl
@@ -54,8 +55,8 @@ class Registration:
     """Fitting the template to a reader's own face mesh (facelib/registration.py, the
     chapter "Your own face")."""
 
-    # "mm", "cm" or "m"; None: detected from the mesh's size (FACE_EXTENT_MM)
-    units: str | None = None
+    # None: detected from the mesh's size (FACE_EXTENT_MM)
+    units: str | None = option(None, help="the mesh's units", choices=tuple(UNITS))
     # our choice: points sampled on the mesh's surface, area-weighted (the fit's target)
     samples: int = 40_000
     # similarity ICP (Umeyama): a third from each of 24 starts, the rest from the best

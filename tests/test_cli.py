@@ -10,7 +10,7 @@ import torch
 import trimesh
 
 from facelib import __main__ as cli, cli_sample, config, data, meshio as io, tasks, training
-from facelib.__main__ import main
+from facelib.__main__ import RECIPE_OPTIONS, build_parser, main, train_settings
 from facelib.face import template as tpl
 
 
@@ -442,3 +442,52 @@ def test_every_settings_field_round_trips_through_its_option(task):
     # every field but those fixed by another (Edit's sampler and eta) was changed at least once
     fixed = {"sampler", "eta"} if task == "edit" else {"eta"}
     assert set(names) - changed <= fixed, set(names) - changed
+
+
+
+def _train_args(*argv):
+    return build_parser().parse_args(["train", *argv])
+
+
+# a valid value other than every recipe's default, per option of `train`
+TRAIN_VALUES = {"dataset": "bu", "classifier_type": "S", "method": "s2d", "split": "expression",
+                "steps": 7, "batch_size": 3, "seed": 5, "conditional": True}
+
+
+@pytest.mark.parametrize("name", RECIPE_OPTIONS)
+def test_every_train_option_sets_its_field_in_every_recipe_that_has_it(name):
+    """`train MODEL --option VALUE` is the recipe's settings with that one field changed (the options are made
+    from the recipes' fields by options.add_option), for every recipe that has the field; a recipe without it
+    refuses the option by name."""
+    train = build_parser()._subparsers._group_actions[0].choices["train"]
+    flag = next(a for a in train._actions if a.dest == name).option_strings[0]
+    value = TRAIN_VALUES[name]
+    argv = [flag] if isinstance(value, bool) else [flag, str(value)]
+    having = [m for m, cls in training.SETTINGS.items() if name in {f.name for f in dataclasses.fields(cls)}]
+    for model in having:
+        default = training.settings_for(model)
+        if name == "steps" and default.epochs is not None:
+            with pytest.raises(ValueError, match="set epochs, not steps"):
+                train_settings(_train_args(model, *argv))
+            continue
+        chosen = train_settings(_train_args(model, *argv))
+        # steps keeps the warm-up at most a tenth of the run (Optimisation.with_steps)
+        assert chosen == (default.with_steps(value) if name == "steps" else
+                          dataclasses.replace(default, **{name: value}))
+    for model in set(training.SETTINGS) - set(having):
+        with pytest.raises(ValueError, match=f"{model} has no setting {name}"):
+            train_settings(_train_args(model, *argv))
+    with pytest.raises(ValueError, match="train all trains the shipped checkpoints"):
+        train_settings(_train_args("all", *argv))
+
+
+def test_a_recipe_setting_with_choices_refuses_another_value_by_name():
+    """--set reaches the fields that have an option too; their choices are checked by the settings themselves."""
+    for model, assignment, allowed in (("guide", "dataset=coma2", "coma', 'bu', 'coma+bu"),
+                                       ("deformer", "method=ours2", "ours', 'no_attention'"),
+                                       ("deformer", "split=people", "identity', 'expression'"),
+                                       ("evaluator", "classifier_type=X", "I', 'S'")):
+        with pytest.raises(ValueError, match=re.escape(allowed)):
+            train_settings(_train_args(model, "--set", assignment))
+    with pytest.raises(ValueError, match="--only and --missing pick checkpoints of train all"):
+        train_settings(_train_args("guide", "--missing"))

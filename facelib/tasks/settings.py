@@ -12,8 +12,9 @@ its :func:`option`.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields, is_dataclass, replace
+from dataclasses import dataclass, fields, is_dataclass, replace
 
+from .. import options
 from ..checks import (
     check_choice,
     check_flag,
@@ -58,31 +59,18 @@ from ..config import (
     TEXT_SCORES,
 )
 from ..data import CLASSIFIER_TYPES, DATASET_NAMES, KIND_NAMES
-
-
-def option(default, help=None, choices=None):
-    """A settings field with the text of its command-line option and, where it has
-    them, its choices: the one place either is written.  A field of the same name in
-    another task's settings, written without them, has the same help and choices (a
-    field means the same in every task; :func:`option_text`)."""
-    given = (("help", help), ("choices", choices))
-    return field(default=default, metadata={k: v for k, v in given if v is not None})
+from ..options import option
 
 
 def option_text(cls, name, key):
-    """The ``key`` ("help" or "choices") of the field ``name`` of the settings class
-    ``cls``: its own or its bases', else that of the first settings class of this
-    module that gives one for a field of that name; None if none does."""
-    if name not in {f.name for f in fields(cls)}:
-        raise ValueError(f"{cls.__name__} has no setting {name!r}")
-    for klass in (*cls.__mro__, *_settings_classes()):
-        found = getattr(klass, "__dataclass_fields__", {}).get(name)
-        if found is not None and key in found.metadata:
-            return found.metadata[key]
-    return None
+    """The ``key`` ("help" or "choices") of the field ``name`` of the task settings
+    ``cls``: its own or its bases', else that of the first task settings class of this
+    module that gives one for a field of that name (a field means the same in every
+    task); None if none does."""
+    return options.option_text(cls, name, key, settings_classes())
 
 
-def _settings_classes():
+def settings_classes():
     """Every settings class of this module, in the order they are written."""
     return [
         c

@@ -7,7 +7,7 @@ and why; ``fast()`` is the fast-mode run (tests, FACELIB_FAST chapters).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, is_dataclass, replace
 
 from ..checks import (
     check_choice,
@@ -20,6 +20,9 @@ from ..config import (
     NUM_FRAMES,
     check_prediction,
 )
+from ..data import CLASSIFIER_TYPES, DATASET_NAMES
+from ..deformation import METHODS as DEFORMATION_METHODS, SPLITS as DEFORMATION_SPLITS
+from ..options import option, option_text
 
 
 OPTIMIZERS = ("adam", "adamw")
@@ -38,8 +41,10 @@ class Optimisation:
     through a new permutation of the data (the last batch of a pass may be smaller), and
     the number of steps follows from the data's size."""
 
-    steps: int = 1000
-    batch_size: int = 64
+    steps: int = option(1000, help="training steps")
+    batch_size: int = option(
+        64, help="global batch, split over the processes (distributed training)"
+    )
     lr: float = 1e-3
     optimizer: str = "adamw"
     betas: tuple = (0.9, 0.999)
@@ -49,9 +54,13 @@ class Optimisation:
     grad_clip: float | None = None
     ema_decay: float | None = None
     epochs: int | None = None
-    seed: int = 0
+    seed: int = option(0, help="seed of the initial weights and the batches")
 
     def __post_init__(self):
+        for f in fields(self):  # a setting with choices (dataset, method, ...)
+            allowed = option_text(type(self), f.name, "choices", settings_classes())
+            if allowed is not None:
+                check_choice(f.name, getattr(self, f.name), allowed)
         check_positive_int("steps", self.steps)
         check_positive_int("batch_size", self.batch_size)
         check_choice("optimizer", self.optimizer, OPTIMIZERS)
@@ -100,7 +109,8 @@ class DenoiserTraining(Optimisation):
     grad_clip: float | None = 1.0  # our choice: stabilises the first steps
     # our choice: visibly cleaner samples for short runs
     ema_decay: float | None = 0.999
-    dataset: str = "coma"  # paper §4: "unless otherwise specified, solely CoMA"
+    # paper §4: "unless otherwise specified, solely CoMA"
+    dataset: str = option("coma", help="the dataset trained on", choices=DATASET_NAMES)
     # paper §4: 40 frames; (35, 45) for the variable-length model of App. A
     num_frames: object = NUM_FRAMES
     num_diffusion_steps: int = NUM_DIFFUSION_STEPS  # paper §4: T = 2000
@@ -118,7 +128,13 @@ class DenoiserTraining(Optimisation):
     # our choice: probability that a sequence gets another anatomy
     anatomy_swap: float = 0.5
     # True: label-conditional, for classifier-free guidance (Ho & Salimans 2022)
-    conditional: bool = False
+    conditional: bool = option(
+        False,
+        help=(
+            "denoiser: label-conditional, for classifier-free guidance (labels dropped"
+            " with probability condition_dropout; checkpoint denoiser_<dataset>_cfg)"
+        ),
+    )
     # conditional only: the label is dropped (-> "no label") this often (MDM: 0.1)
     condition_dropout: float = 0.1
     # > 0: a join denoiser (DenoiserConfig.known_input; CondMDI, Cohan et al. 2024):
@@ -179,7 +195,12 @@ class GuideTraining(Optimisation):
     grad_clip: float | None = 1.0
     dataset: str = "coma"
     # paper §5.1: type I for label control, type S for Alg. 4
-    classifier_type: str = "I"
+    classifier_type: str = option(
+        "I",
+        help="guide, evaluator: I = label, S = label x N2E/E2N",
+        choices=CLASSIFIER_TYPES,
+        flag="--type",
+    )
     # the DDPM's schedule (paper §4): x_t must look like the sampler's
     num_diffusion_steps: int = NUM_DIFFUSION_STEPS
     schedule: str = "linear"
@@ -374,11 +395,26 @@ class DeformationTraining(Optimisation):
     lr: float = 1e-3  # S2D
     optimizer: str = "adam"
     final_lr_fraction: float = 0.1  # our choice: cosine decay to lr / 10
-    method: str = "ours"  # a row of Table 5 (deformation.METHODS)
-    split: str = "identity"  # "identity" or "expression" (§6)
+    method: str = option(
+        "ours", help="deformer: a row of Table 5", choices=tuple(DEFORMATION_METHODS)
+    )
+    split: str = option(
+        "identity",
+        help="deformer: 3 subjects or 3 expressions held out, as §6",
+        choices=DEFORMATION_SPLITS,
+    )
     frames_per_batch: int = 4
     frames_per_sequence: int = 10  # frames kept per training sequence
     max_sequences: int | None = None  # fast mode: a subset of the training sequences
 
     def fast(self):
         return replace(self, steps=20, max_sequences=16, frames_per_sequence=4)
+
+
+def settings_classes():
+    """Every recipe's settings class of this module, in the order they are written."""
+    return [
+        c
+        for c in globals().values()
+        if isinstance(c, type) and is_dataclass(c) and c.__module__ == __name__
+    ]

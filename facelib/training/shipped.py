@@ -11,8 +11,8 @@ shipped.
 from __future__ import annotations
 
 from ..checkpoints import checkpoint_name
+from ..deformation import METHODS as DEFORMER_METHODS, SPLITS as DEFORMER_SPLITS
 
-_DEFORMER_METHODS = ("ours", "no_attention", "s2d", "coma", "linear")
 SHIPPED = {
     "denoiser_coma": ("denoiser", {}),
     "denoiser_bu": ("denoiser", {"dataset": "bu"}),
@@ -35,8 +35,8 @@ SHIPPED = {
     "lstm_filler_coma": ("lstm_filler", {}),
     **{
         checkpoint_name("deform", m, s): ("deformer", {"method": m, "split": s})
-        for m in _DEFORMER_METHODS
-        for s in ("identity", "expression")
+        for m in DEFORMER_METHODS
+        for s in DEFORMER_SPLITS
     },
     # Issue 25: Table 5 over three training seeds for ours, ours without attention and
     # S2D (seed 0 is above).
@@ -46,7 +46,7 @@ SHIPPED = {
             {"method": m, "split": s, "seed": k},
         )
         for m in ("ours", "no_attention", "s2d")
-        for s in ("identity", "expression")
+        for s in DEFORMER_SPLITS
         for k in (1, 2)
     },
     # Issue 27: the label-conditional denoiser of classifier-free guidance
