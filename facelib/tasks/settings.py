@@ -12,7 +12,7 @@ its :func:`option`.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields, is_dataclass, replace
+from dataclasses import dataclass, is_dataclass, replace
 
 from .. import options
 from ..checks import (
