@@ -284,7 +284,34 @@ class KnownFrames:
             x_hat = self.inner(x_hat, xt, t, out)
         if self.feather > 0:
             x_hat = x_hat + self.feathered_shift(out["x0"], t)
-        return self.merge(x_hat, self.noised(t - 1))
+        return self.merge(x_hat, self.known_step(t, out))
+
+    def known_step(self, t, out):
+        """The known coordinates of x_{t-1}.  The ancestral chain draws them afresh
+        from q(x_{t-1} | x_0) (Alg. 3 line 11, as printed).  A DDIM chain (any eta; the
+        students' and the flow's too) takes its own step with x0_hat replaced by the
+        known x_0:
+
+            x_{t-1} = sqrt(abar_{t-1}) x_0 + sqrt(1 - abar_{t-1} - sigma_t^2) eps_hat
+                      + sigma_t z
+
+        (eps_hat: ``out["eps"]``), so that at eta = 0 the chain stays deterministic and
+        the known frames keep the noise the model reads in them and in their
+        neighbours, continuous in eta
+        (a fresh draw at every step of a deterministic chain gives the known frames
+        noise the unknown ones never see: keyframes on 16 Euler steps of the flow were
+        met smoothly far less often; benchmarks/few_steps.py --experiment tasks)."""
+        if self.diffusion.eta is None or t == 1:
+            return self.noised(t - 1)
+        d = self.diffusion
+        sigma = float(d.sigmas[t])
+        abar_prev = float(d.alphas_bar_prev[t])
+        keep = max(1.0 - abar_prev - sigma**2, 0.0) ** 0.5
+        x = abar_prev**0.5 * self.x0 + keep * out["eps"]
+        if sigma > 0:
+            z = torch.randn(self.x0.shape, generator=self.generator, dtype=x.dtype)
+            x = x + sigma * z.to(x.device)
+        return x
 
     def feathered_shift(self, x0_hat, t):
         """The shift of every coordinate by its known neighbours' gaps

@@ -482,6 +482,23 @@ CODE_CHANGES = [
             "text_table2_enriched",
         ),
     ),
+    (
+        "2026-12-07 01:51 UTC",
+        (
+            "options that combine (issue 57): DDIM guidance continuous in eta, one clean"
+            " estimate (the flow's AU and text scores), the handshake's anchors imposed"
+            " after the shared frames are averaged"
+        ),
+        ("long_sequences", "long_sequences_free", "few_steps", "few_steps_tasks"),
+    ),
+    (
+        "2026-12-07 08:40 UTC",
+        (
+            "a DDIM chain's known frames take its own step with the model's noise"
+            " estimate (issue 57: inpainting.KnownFrames.known_step)"
+        ),
+        ("few_steps_tasks",),
+    ),
 ]
 
 

@@ -62,6 +62,35 @@ def test_known_frames_at_step_t_minus_1_have_the_exact_marginal_of_q(t, respaced
     assert torch.equal(hook(x_hat, None, 1, None)[:, 0], x0[:, 0])  # at t = 1, x_0|S_K is the data itself
 
 
+@pytest.mark.parametrize("t", [2, 10, 40])
+def test_on_a_ddim_chain_the_known_frames_take_its_own_step_continuous_in_eta(t):
+    """KnownFrames on a DDIM chain: the known frames of x_{t-1} are sqrt(abar_{t-1}) x_0 + sqrt(1 - abar_{t-1} -
+    sigma_t^2) eps_hat + sigma_t z: at eta = 0 no random number is drawn (two known-noise streams give the same
+    chain; Alg. 3's fresh draw made them differ), the step tends to eta = 0's as eta -> 0, and at eta = 1 the
+    spread around its mean is sigma_t's.  The ancestral chain keeps Alg. 3's draw (the test above)."""
+    base = GaussianDiffusion(linear_betas(2000)).respace(50)
+    n = 4000
+    x0 = torch.full((n, 2, 68, 3), 0.7, dtype=torch.float64)
+    known = torch.tensor([[True, False]]).expand(n, 2)
+    eps_hat = torch.randn(x0.shape, generator=torch.Generator().manual_seed(3), dtype=torch.float64)
+    out = {"eps": eps_hat, "x0": x0}
+    x_hat = torch.full_like(x0, 123.0)
+
+    def step(eta, seed):
+        hook = inpainting.KnownFrames(base.with_eta(eta), x0, known, torch.Generator().manual_seed(seed))
+        return hook(x_hat, None, t, out)
+
+    abar = base.alphas_bar_prev[t]
+    expected = np.sqrt(abar) * 0.7 + np.sqrt(1 - abar) * eps_hat[:, 0]
+    assert torch.allclose(step(0.0, 0)[:, 0], expected) and torch.equal(step(0.0, 0), step(0.0, 1))
+    assert (step(0.0, 0)[:, 1] == 123.0).all()
+    assert (step(1e-4, 0) - step(0.0, 0)).abs().max() < 1e-3
+    sigma = float(base.with_eta(1.0).sigmas[t])
+    mean = np.sqrt(abar) * 0.7 + np.sqrt(max(1 - abar - sigma**2, 0.0)) * eps_hat[:, 0]
+    spread = (step(1.0, 0)[:, 0] - mean).std().item()
+    assert abs(spread / sigma - 1) < 0.05, (spread, sigma)
+
+
 def test_feathered_replacement_shifts_the_neighbours_by_the_known_frames_signal_step():
     # KnownFrames(feather=sigma): every unknown coordinate moves by sqrt(abar_{t-1}) (x_0 - x0_hat) of
     # the known coordinates of its landmark, Gaussian-weighted by their distance in frames and
