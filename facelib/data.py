@@ -44,7 +44,6 @@ _SOURCE_FILES = (
     "face/expressions.py",
     "face/sequences.py",
     "data.py",
-    "config.py",
 )
 
 
@@ -122,9 +121,9 @@ def _check_length(num_frames):
 
 
 def generator_fingerprint(spec, num_frames):
-    """Hash of everything that determines a dataset: spec, length, timing and the
+    """Hash of everything that determines a dataset: spec, length, timing, the
     generator's code (its syntax tree without docstrings, so that a comment or a line
-    break does not invalidate the cache)."""
+    break does not invalidate the cache) and the config values it reads."""
     h = hashlib.sha256()
     h.update(
         json.dumps(
@@ -133,9 +132,28 @@ def generator_fingerprint(spec, num_frames):
         ).encode()
     )
     root = Path(__file__).parent
-    for rel in _SOURCE_FILES:
-        h.update(_code_of((root / rel).read_text()).encode())
+    sources = [(root / rel).read_text() for rel in _SOURCE_FILES]
+    for source in sources:
+        h.update(_code_of(source).encode())
+    h.update(repr(_config_read_by(sources)).encode())
     return h.hexdigest()[:12]
+
+
+def _config_read_by(sources):
+    """The values of the facelib/config.py names that the generator's ``sources``
+    read (``from ..config import X``, ``config.X``), by name: a change elsewhere in
+    config.py (a guidance constant) leaves the caches valid.  Paths and functions say
+    where the caches go, not what they hold, and are left out."""
+    names = set()
+    for node in (n for source in sources for n in ast.walk(ast.parse(source))):
+        if isinstance(node, ast.ImportFrom) and (node.module or "").endswith("config"):
+            names.update(a.name for a in node.names)
+        elif isinstance(node, ast.Attribute) and getattr(node.value, "id", "") == "config":
+            names.add(node.attr)
+    values = {n: getattr(config, n) for n in sorted(names)}
+    return {
+        n: v for n, v in values.items() if not callable(v) and not isinstance(v, Path)
+    }
 
 
 def _code_of(source):

@@ -36,6 +36,17 @@ def test_generation_is_deterministic():
         np.testing.assert_array_equal(a[k], b[k], err_msg=k)
 
 
+def test_the_cache_key_reads_the_config_the_generator_reads_and_nothing_else(monkeypatch):
+    """A dataset's cache key hashes the generator's code and the config values it reads (DATASETS, WORLD, ...),
+    not the whole of config.py: a guidance constant leaves every cache valid, a world setting does not."""
+    spec, key = config.DATASETS["coma"], data.generator_fingerprint(config.DATASETS["coma"], 40)
+    assert "config.py" not in data._SOURCE_FILES
+    monkeypatch.setattr(config, "GUIDANCE_WEIGHT", config.GUIDANCE_WEIGHT + 1)
+    assert data.generator_fingerprint(spec, 40) == key
+    monkeypatch.setattr(config, "WORLDS", (*config.WORLDS, 99))
+    assert data.generator_fingerprint(spec, 40) != key
+
+
 def test_committed_fingerprints_match():
     expected = json.loads(data.FINGERPRINT_FILE.read_text())
     for name in config.DATASETS:
