@@ -167,7 +167,10 @@ def train_settings(args):
             )
         return None
     if args.only or args.missing:
-        raise ValueError(f"--only and --missing pick checkpoints of train all, not of {args.name}")
+        raise ValueError(
+            "--only and --missing pick checkpoints of train all, not of"
+            f" {args.name}"
+        )
     for assignment in args.set:
         name, value = _setting(args.name, assignment)
         if name in given:

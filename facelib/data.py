@@ -148,8 +148,9 @@ def _config_read_by(sources):
     for node in (n for source in sources for n in ast.walk(ast.parse(source))):
         if isinstance(node, ast.ImportFrom) and (node.module or "").endswith("config"):
             names.update(a.name for a in node.names)
-        elif isinstance(node, ast.Attribute) and getattr(node.value, "id", "") == "config":
-            names.add(node.attr)
+        elif isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name):
+            if node.value.id == "config":
+                names.add(node.attr)
     values = {n: getattr(config, n) for n in sorted(names)}
     return {
         n: v for n, v in values.items() if not callable(v) and not isinstance(v, Path)

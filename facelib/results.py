@@ -485,9 +485,9 @@ CODE_CHANGES = [
     (
         "2026-12-07 01:51 UTC",
         (
-            "options that combine (issue 57): DDIM guidance continuous in eta, one clean"
-            " estimate (the flow's AU and text scores), the handshake's anchors imposed"
-            " after the shared frames are averaged"
+            "options that combine (issue 57): DDIM guidance continuous in eta, one"
+            " clean estimate (the flow's AU and text scores), the handshake's anchors"
+            " imposed after the shared frames are averaged"
         ),
         ("long_sequences", "long_sequences_free", "few_steps", "few_steps_tasks"),
     ),

@@ -102,7 +102,7 @@ def test_short_training_learns_and_is_deterministic(test_pairs):
     assert history["loss"][-1] < 0.8 * history["loss"][0]
     result = deformation.evaluate(model, test_pairs)
     assert result["per_vertex"].shape == (V,) and 0 < result["mean"] and result["std"] > 0
-    with pytest.raises(ValueError, match="unknown method 'flame'; allowed: ours, no_attention, s2d, coma, linear"):
+    with pytest.raises(ValueError, match=r"method must be one of \('ours', 'no_attention', 's2d', 'coma', 'linear'\), got 'flame'"):
         training.recipe("deformer", method="flame")
 
 
