@@ -98,7 +98,7 @@ def recipe_options(parser):
         having = {m: c for m, c in training.SETTINGS.items() if name in _field_names(c)}
         by_value = {}
         for model, cls in having.items():
-            value = cli_sample._show(getattr(cls(), name))
+            value = options.shown(getattr(cls(), name))
             if name == "steps" and cls().epochs is not None:
                 value = f"{cls().epochs} epochs, not steps,"
             by_value.setdefault(value, []).append(model)

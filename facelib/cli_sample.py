@@ -24,7 +24,7 @@ import numpy as np
 
 from . import checkpoints, config, inpainting, tasks
 from .face.sequences import MAX_FRAMES, MIN_FRAMES
-from .options import add_option
+from .options import add_option, shown
 from .training.loop import device_for
 
 INPUT_LENGTH = ("fill", "edit")  # tasks whose sequences have the input's length
@@ -384,19 +384,15 @@ TASKS = {
 }
 
 
-def _show(value):
-    return "none" if value is None else value
-
-
 def _default(task, name):
     """'default X; --paper: Y' for the help of an option (a task that is not in the
     paper has no --paper)."""
     value = getattr(TASKS[task].settings, name)
     if not TASKS[task].in_paper:
-        return f"default {_show(value)}"
+        return f"default {shown(value)}"
     return (
-        f"default {_show(value)}; --paper:"
-        f" {_show(getattr(TASKS[task].settings.paper(), name))}"
+        f"default {shown(value)}; --paper:"
+        f" {shown(getattr(TASKS[task].settings.paper(), name))}"
     )
 
 

@@ -303,11 +303,9 @@ class KnownFrames:
         met smoothly far less often; benchmarks/few_steps.py --experiment tasks)."""
         if self.diffusion.eta is None or t == 1:
             return self.noised(t - 1)
-        d = self.diffusion
-        sigma = float(d.sigmas[t])
-        abar_prev = float(d.alphas_bar_prev[t])
-        keep = max(1.0 - abar_prev - sigma**2, 0.0) ** 0.5
-        x = abar_prev**0.5 * self.x0 + keep * out["eps"]
+        # the chain's own DDIM mean, with x0_hat = x_0 (xt only gives the shape)
+        x = self.diffusion.mean_variance_from_eps(self.x0, t, out["eps"], self.x0)
+        x, sigma = x["mean"], float(self.diffusion.sigmas[t])
         if sigma > 0:
             z = torch.randn(self.x0.shape, generator=self.generator, dtype=x.dtype)
             x = x + sigma * z.to(x.device)

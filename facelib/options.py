@@ -33,6 +33,11 @@ def option_text(cls, name, key, family=()):
     return None
 
 
+def shown(value):
+    """A setting's value as the command line spells it (None: 'none')."""
+    return "none" if value is None else value
+
+
 def field_type(cls, name):
     """(type, optional) of the field ``name`` of the dataclass ``cls``, read from its
     annotation: ``int | None`` -> (int, True), ``float`` -> (float, False)."""
