@@ -77,6 +77,9 @@ class DatasetSpec:
     style_leak_max: float
     style_blend_max: float
     num_frames: int = NUM_FRAMES  # paper §4: sequences of 40 frames
+    # the takes of each (subject, label) are numbered from here: a spec with the seed
+    # of another and a first take past its last plays new takes of the same people
+    first_take: int = 0
 
 
 DATASETS = {
@@ -117,7 +120,46 @@ DATASETS = {
         style_leak_max=0.2,
         style_blend_max=0.2,
     ),
+    # Issue 58: the reference population of the coverage protocol (the evaluation
+    # chapter): 50 new people performing CoMA's labels by CoMA's recipes, N2E and E2N
+    # once each, never trained on; enough people for an interval over people (the
+    # test split holds 3).  All of it is its "test" split.
+    "coma_people": DatasetSpec(
+        "coma_people",
+        "coma",
+        num_subjects=50,
+        num_sequences=1200,
+        num_test_subjects=50,
+        takes_per_pair=2,
+        seed=3003,
+        style_gain_sigma=0.45,
+        style_leak_probability=0.9,
+        style_leak_max=0.4,
+        style_blend_max=0.22,
+    ),
+    # Issue 58: new takes of CoMA's own people (its seed, its styles; takes 5 and 6,
+    # past CoMA's last): its train split holds new takes of the people a denoiser
+    # learned from, which separates replaying the training sequences from meeting new
+    # anatomy (the held-out loss of the denoiser chapter)
+    "coma_retakes": DatasetSpec(
+        "coma_retakes",
+        "coma",
+        num_subjects=12,
+        num_sequences=288,
+        num_test_subjects=3,
+        takes_per_pair=2,
+        seed=1001,
+        style_gain_sigma=0.45,
+        style_leak_probability=0.9,
+        style_leak_max=0.4,
+        style_blend_max=0.22,
+        first_take=5,
+    ),
 }
+# the datasets made to evaluate with, never to train or sample on
+EVALUATION_DATASETS = ("coma_people", "coma_retakes")
+# the reference population of a dataset's coverage protocol (metrics.population_gap)
+REFERENCE_POPULATIONS = {"coma": "coma_people"}
 SPLITS = ("train", "test", "all")
 
 

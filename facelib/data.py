@@ -50,6 +50,8 @@ _SOURCE_FILES = (
 # paper §5.2: "merging CoMA and BU-4DFE" (18 actions)
 MERGED_DATASETS = {"coma+bu": ("coma", "bu")}
 DATASET_NAMES = (*config.DATASETS, *MERGED_DATASETS)
+# the datasets a model is trained or sampled on (the settings' choices)
+MODEL_DATASETS = tuple(n for n in DATASET_NAMES if n not in config.EVALUATION_DATASETS)
 
 
 def check_dataset_name(name):
@@ -189,9 +191,9 @@ def _sequence_plan(spec):
     plan = []
     for p, (s, l) in enumerate(pairs):
         takes = spec.takes_per_pair + (p in extra_pairs)
-        for take in range(takes):
-            kind = take % 2 if take < spec.takes_per_pair else int(rng.integers(2))
-            plan.append((s, l, take, kind))
+        for k in range(takes):
+            kind = k % 2 if k < spec.takes_per_pair else int(rng.integers(2))
+            plan.append((s, l, spec.first_take + k, kind))
     return plan
 
 
@@ -256,7 +258,7 @@ def generate(spec, num_frames=40):
     for i, (s, l, take, kind) in enumerate(plan):
         if face is None or plan[i - 1][0] != s:
             face = Face(coeffs[s])
-        if take == 0:
+        if take == spec.first_take:
             style = expressions.sample_style(
                 labels[l], np.random.default_rng([spec.seed, 1, s, l]), spread, labels
             )

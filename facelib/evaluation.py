@@ -22,17 +22,17 @@ import numpy as np
 import torch
 from scipy.stats import ks_2samp
 
-from . import data, metrics
+from . import config, data, metrics
 from .checkpoints import checkpoint_name, load_checkpoint
 from .face.aus import AU_NAMES
-from .models.classifier import LSTMClassifier
+from .models.classifier import ARCHITECTURES, SequenceClassifier, classifier_from_config
 
 
 @dataclass
 class Evaluator:
     """An IC with the training-set features that FID compares against."""
 
-    model: LSTMClassifier
+    model: SequenceClassifier
     dataset: str
     classifier_type: str
     class_names: tuple
@@ -224,13 +224,20 @@ def check_sequences(sequences):
     return x
 
 
-def load_evaluator(dataset="coma", classifier_type="I", name=None):
+def load_evaluator(dataset="coma", classifier_type="I", name=None, reader="lstm"):
     """Load the shipped IC ic_<dataset>_<type> (sha256 checked) and the training
-    features for FID."""
+    features for FID; ``reader`` "cnn": the second reader ic_<dataset>_<type>_cnn (a
+    temporal CNN, models.classifier), scored the same way."""
     data.check_dataset_name(dataset)
     data.check_classifier_type(classifier_type)
-    name = name or checkpoint_name("ic", dataset, classifier_type)
-    model, meta = load_checkpoint(name, "evaluator", lambda c: LSTMClassifier(**c))
+    if reader not in ARCHITECTURES:
+        raise ValueError(
+            f"unknown reader {reader!r}; allowed: {', '.join(ARCHITECTURES)}"
+        )
+    name = name or checkpoint_name("ic", dataset, classifier_type) + (
+        "" if reader == "lstm" else f"_{reader}"
+    )
+    model, meta = load_checkpoint(name, "evaluator", classifier_from_config)
     names = data.check_class_names(meta["class_names"], dataset, classifier_type, name)
     evaluator = Evaluator(
         model, dataset, classifier_type, names, np.zeros((0, len(names)))
@@ -239,6 +246,91 @@ def load_evaluator(dataset="coma", classifier_type="I", name=None):
         data.load_dataset(dataset, "train").landmarks
     )
     return evaluator
+
+
+# the two percentiles of each region's amplitudes that the population protocol compares
+POPULATION_PERCENTILES = (50, 90)
+
+
+def population_gap(
+    sequences, dataset="coma", readers=ARCHITECTURES, num_resamples=2000, seed=0
+):
+    """The coverage protocol against a reference population of new people (issue 58,
+    the evaluation chapter): how far ``sequences`` (n, F, 68, 3) in mm, generated
+    without a label (the samples of several seeds pooled), sit from what the dataset's
+    reference population does (config.REFERENCE_POPULATIONS: 50 new people performing
+    its labels).  Returns a dict:
+
+    * "amplitudes": {region: {"p50": (gap, (low, high)), "p90": ...}}: each
+      percentile of each sequence's largest motion (metrics.amplitudes) generated
+      minus reference, in mm, with its 95 % interval (metrics.population_gap:
+      generated resampled by sample, the reference by person);
+    * "label_mix": {reader: metrics.label_mix_gap of the reader's predicted labels},
+      for the IC ("lstm") and the second reader ("cnn"), with the class names.
+    """
+    reference = data.load_dataset(config.REFERENCE_POPULATIONS[dataset], "test")
+    x = check_sequences(sequences)
+    generated_amplitudes = metrics.amplitudes(x)
+    reference_amplitudes = metrics.amplitudes(reference.landmarks)
+    out = {"n": len(x), "amplitudes": {}, "label_mix": {}}
+    for region, values in generated_amplitudes.items():
+        out["amplitudes"][region] = {
+            f"p{q}": metrics.population_gap(
+                values,
+                reference_amplitudes[region],
+                reference.subjects,
+                lambda v, q=q: np.percentile(v, q),
+                num_resamples=num_resamples,
+                seed=seed,
+            )
+            for q in POPULATION_PERCENTILES
+        }
+    for reader in readers:
+        ev = load_evaluator(dataset, "I", reader=reader)
+        gap = metrics.label_mix_gap(
+            ev.features(x).argmax(1),
+            ev.features(reference.landmarks).argmax(1),
+            reference.subjects,
+            len(ev.class_names),
+            seed=seed,
+        )
+        out["label_mix"][reader] = gap | {"class_names": list(ev.class_names)}
+    return out
+
+
+# the noise levels at which the held-out denoising loss is read (of T = 2000)
+LOSS_TIMES = (50, 200, 600, 1200)
+
+
+@torch.no_grad()
+def denoising_loss(denoiser, landmarks, times=LOSS_TIMES, draws=4, seed=0):
+    """The simple loss of Eq. 8, ||eps - eps_theta(x_t, t)||^2 averaged over
+    ``landmarks`` (n, F, 68, 3) in mm and ``draws`` noise draws per sequence, at each
+    step t of ``times``: {t: loss}.  The same noise for every model and dataset given
+    the same ``seed`` and n, so that models and splits compare draw for draw; the
+    noise estimate whatever the network predicts (the models compare on one scale).
+    Read on the training split, on new takes of the training people (coma_retakes)
+    and on new people, it separates replaying the training sequences from meeting new
+    anatomy (issue 58)."""
+    x0 = denoiser.to_model(landmarks)
+    generator = torch.Generator().manual_seed(seed)
+    out = {}
+    for t in times:
+        total = 0.0
+        for _ in range(draws):
+            eps = torch.randn(x0.shape, generator=generator, dtype=x0.dtype)
+            step = torch.full((len(x0),), t)
+            xt = denoiser.diffusion.q_sample(x0, step, eps.to(x0.device))
+            labels = denoiser.diffusion.time_labels[step].to(x0.device)
+            pred = torch.cat(
+                [
+                    denoiser.model(xt[i : i + 256], labels[i : i + 256])
+                    for i in range(0, len(x0), 256)
+                ]
+            )
+            total += float(((eps.to(x0.device) - pred) ** 2).mean())
+        out[t] = total / draws
+    return out
 
 
 def compare(generators, evaluator, targets, num_resamples=1000):

@@ -465,6 +465,100 @@ def subset_total_variations(labels, reference, size, num_subsets=1000, seed=0):
     )
 
 
+def _people_groups(people):
+    """The row indices of each person of ``people`` (m,) ids, in id order."""
+    ids, inverse = np.unique(np.asarray(people), return_inverse=True)
+    if len(ids) < 2:
+        raise ValueError(f"need the sequences of 2 or more people, got {len(ids)}")
+    return [np.flatnonzero(inverse == k) for k in range(len(ids))]
+
+
+def population_gap(
+    generated, reference, people, statistic, num_resamples=2000, level=0.95, seed=0
+):
+    """How far ``statistic`` (a function of a 1-D array, e.g. the 90th percentile) of
+    ``generated`` values sits from that of a reference population, with its bootstrap
+    interval: (difference, (low, high)) of statistic(generated) - statistic(reference).
+
+    The generated values (one per sample; the samples of several seeds pooled, each an
+    independent draw, so that the interval holds the seed-to-seed spread) are resampled
+    by row; the reference values (m,) by person (``people`` (m,) ids: a person's
+    sequences are resampled together, since they share a face and a style), the two
+    independently (:func:`scipy.stats.bootstrap`, unpaired, percentile interval;
+    ``seed`` seeds it).  A generator that reproduces the population scores an interval
+    containing 0 (the evaluation chapter's coverage protocol)."""
+    generated = np.asarray(generated, dtype=np.float64)
+    reference = np.asarray(reference, dtype=np.float64)
+    if generated.ndim != 1 or len(generated) < 2 or reference.shape != np.shape(people):
+        raise ValueError(
+            "need 2 or more generated values (n,) and reference values (m,) with a"
+            f" person id each, got shapes {generated.shape}, {reference.shape} and"
+            f" {np.shape(people)}"
+        )
+    groups = [reference[g] for g in _people_groups(people)]
+
+    def difference(g, chosen):
+        chosen = [groups[int(k)] for k in chosen]
+        return statistic(g) - statistic(np.concatenate(chosen))
+
+    result = scipy.stats.bootstrap(
+        (generated, np.arange(len(groups))),
+        difference,
+        paired=False,
+        vectorized=False,
+        n_resamples=num_resamples,
+        confidence_level=level,
+        method="percentile",
+        rng=np.random.default_rng(seed),
+    )
+    ci = result.confidence_interval
+    value = difference(generated, range(len(groups)))
+    return float(value), (float(ci.low), float(ci.high))
+
+
+def label_mix_gap(
+    generated, reference, people, num_classes, num_resamples=1000, level=0.95, seed=0
+):
+    """A generated set's label mix against a reference population's, as read by one
+    classifier: ``generated`` (n,) and ``reference`` (m,) its predicted classes,
+    ``people`` (m,) the reference's person ids.  Returns a dict:
+
+    * "mix", "reference_mix": the two histograms;
+    * "tv": their total variation; "max_ratio": the largest share of a class over its
+      reference share (a label made too often: 1.5 is half as often again);
+    * "tv_real", "max_ratio_real": the ``level`` percentile of the same two
+      statistics over ``num_resamples`` real sets of the generated set's size (people
+      drawn with replacement, then n of their sequences): how far a real set of that
+      size strays by chance.  A generator whose numbers lie below them makes the
+      labels as real people do."""
+    generated, reference = np.asarray(generated), np.asarray(reference)
+    groups = _people_groups(people)
+    target = label_histogram(reference, num_classes)
+    if (target == 0).any():
+        raise ValueError("every class must occur in the reference population")
+
+    def statistics(labels):
+        mix = label_histogram(labels, num_classes)
+        return mix, total_variation(mix, target), float((mix / target).max())
+
+    mix, tv, ratio = statistics(generated)
+    rng = np.random.default_rng(seed)
+    real = []
+    for _ in range(num_resamples):
+        drawn = rng.integers(0, len(groups), len(groups))
+        pool = np.concatenate([groups[k] for k in drawn])
+        real.append(statistics(reference[rng.choice(pool, len(generated))])[1:])
+    real = np.array(real)
+    return {
+        "mix": mix,
+        "reference_mix": target,
+        "tv": tv,
+        "max_ratio": ratio,
+        "tv_real": float(np.percentile(real[:, 0], 100 * level)),
+        "max_ratio_real": float(np.percentile(real[:, 1], 100 * level)),
+    }
+
+
 def _kth_neighbour_radii(features, k):
     """Distance of each row of ``features`` to its k-th nearest other row."""
     d = np.linalg.norm(features[:, None] - features[None], axis=-1)

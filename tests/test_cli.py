@@ -382,7 +382,7 @@ def _alternatives(settings, name, choices):
     elif value is None:
         candidates = [3, 0.5, "0:2", "N2E"]
     elif name.endswith("dataset"):
-        candidates = [d for d in data.DATASET_NAMES if d != value]
+        candidates = [d for d in data.MODEL_DATASETS if d != value]
     else:  # a text without choices (Edit's keep)
         candidates = [None, "0:2"]
     out = []

@@ -86,6 +86,8 @@ MODELS = {  # name: (build, call(model, make) with ``make`` putting a CPU tensor
                   _sequence_call),
     "au_regressor": (lambda: au_regressor.AURegressor(au_regressor.AURegressorConfig(**SMALL)), _sequence_call),
     "evaluator": (lambda: classifier.LSTMClassifier(3, hidden=8), lambda m, make: m(make(torch.randn(B, F, L, 3)))),
+    "evaluator_cnn": (lambda: classifier.TemporalCNNClassifier(3, channels=8),
+                      lambda m, make: m(make(torch.randn(B, F, L, 3)))),
     "deformer_ours": (lambda: deformer.Deformer(deformer.DeformerConfig(channels=(4,) * 5)), _mesh_call),
     "deformer_no_attention": (lambda: deformer.Deformer(deformer.DeformerConfig(channels=(4,) * 5, attention=False)),
                               _mesh_call),
@@ -106,7 +108,7 @@ MODELS = {  # name: (build, call(model, make) with ``make`` putting a CPU tensor
 
 # The shipped checkpoint kinds (data/checkpoints) and the entries of MODELS that build them.
 KINDS = {"denoiser": ("denoiser", "denoiser_cfg"), "guide": ("guide",), "text_head": ("text_head",),
-         "au_regressor": ("au_regressor",), "evaluator": ("evaluator",),
+         "au_regressor": ("au_regressor",), "evaluator": ("evaluator", "evaluator_cnn"),
          "deformer": ("deformer_ours", "deformer_no_attention", "deformer_s2d", "deformer_coma", "deformer_linear"),
          "actor": ("actor",), "motion3dgan": ("motion3dgan", "motion3dgan_critic"), "motionclip": ("motionclip",),
          "lstm_filler": ("lstm_filler",)}
@@ -270,7 +272,7 @@ SHIPPED_BUILDERS = {  # kind: build(config, metadata), as facelib's loaders buil
     "guide": lambda c, meta: noisy_classifier.NoisyClassifier(noisy_classifier.NoisyClassifierConfig(**c)),
     "text_head": lambda c, meta: noisy_classifier.NoisyTextHead(noisy_classifier.TextHeadConfig(**c)),
     "au_regressor": lambda c, meta: au_regressor.AURegressor(au_regressor.AURegressorConfig(**c)),
-    "evaluator": lambda c, meta: classifier.LSTMClassifier(**c),
+    "evaluator": lambda c, meta: classifier.classifier_from_config(c),
     "deformer": lambda c, meta: deformation.METHODS[meta["method"]][0].build(c),
     "actor": lambda c, meta: actor.build(c),
     "motion3dgan": lambda c, meta: motion3dgan.build(c),

@@ -58,7 +58,7 @@ from ..config import (
     TEXT_LR_REFERENCE_STEPS,
     TEXT_SCORES,
 )
-from ..data import CLASSIFIER_TYPES, DATASET_NAMES, KIND_NAMES
+from ..data import CLASSIFIER_TYPES, MODEL_DATASETS, KIND_NAMES
 from ..options import option
 
 
@@ -238,7 +238,7 @@ class Unconditional(Sampling):
     dataset: str = option(
         "coma",
         "the data the networks were trained on",
-        choices=DATASET_NAMES,
+        choices=MODEL_DATASETS,
     )
 
 

@@ -28,7 +28,7 @@ from ..flow import RectifiedFlow
 from ..inpainting import FILL_SETTINGS, fill_masks
 from ..models import actor, lstm_filler, motion3dgan, motionclip
 from ..models.au_regressor import AURegressor, AURegressorConfig
-from ..models.classifier import LSTMClassifier
+from ..models.classifier import classifier_from_config
 from ..models.denoiser import Denoiser, DenoiserConfig
 from ..models.deformer import deformation_loss
 from ..models.noisy_classifier import (
@@ -785,7 +785,7 @@ class TextHeadRecipe(_NoisyRecipe):
 # the evaluation's IC
 class EvaluatorRecipe(Recipe):
     """The independent classifier (IC, §5): an LSTM on clean sequences, cross-entropy,
-    epochs."""
+    epochs; with architecture "cnn", the second reader (a temporal CNN)."""
 
     kind = "evaluator"
 
@@ -805,13 +805,7 @@ class EvaluatorRecipe(Recipe):
         self.size = len(self.x)
 
     def build(self, generator):
-        s = self.settings
-        model = LSTMClassifier(
-            len(self.class_names),
-            hidden=s.hidden,
-            num_landmarks=config.NUM_LANDMARKS,
-            inputs=s.inputs,
-        )
+        model = classifier_from_config(self.model_config(None))
         model.fit_normalization(self.x)
         return model
 
@@ -821,20 +815,26 @@ class EvaluatorRecipe(Recipe):
         return loss, {"loss": loss.item()}
 
     def model_config(self, model):
+        s = self.settings
+        width = (
+            {"hidden": s.hidden}
+            if s.architecture == "lstm"
+            else {"architecture": s.architecture, "channels": s.hidden}
+        )
         return {
             "num_classes": len(self.class_names),
-            "hidden": self.settings.hidden,
+            **width,
             "num_landmarks": config.NUM_LANDMARKS,
-            "inputs": self.settings.inputs,
+            "inputs": s.inputs,
         }
 
     def metadata(self, model):
         return super().metadata(model) | {"class_names": self.class_names}
 
     def checkpoint_name(self):
-        return checkpoint_name(
-            "ic", self.settings.dataset, self.settings.classifier_type
-        )
+        s = self.settings
+        name = checkpoint_name("ic", s.dataset, s.classifier_type)
+        return name if s.architecture == "lstm" else f"{name}_{s.architecture}"
 
 
 # -------------------------------------------------------------------------- baselines

@@ -20,8 +20,9 @@ from ..config import (
     NUM_FRAMES,
     check_prediction,
 )
-from ..data import CLASSIFIER_TYPES, DATASET_NAMES
+from ..data import CLASSIFIER_TYPES, MODEL_DATASETS
 from ..deformation import METHODS as DEFORMATION_METHODS, SPLITS as DEFORMATION_SPLITS
+from ..models.classifier import ARCHITECTURES
 from ..options import option, option_text
 
 
@@ -110,7 +111,7 @@ class DenoiserTraining(Optimisation):
     # our choice: visibly cleaner samples for short runs
     ema_decay: float | None = 0.999
     # paper §4: "unless otherwise specified, solely CoMA"
-    dataset: str = option("coma", help="the dataset trained on", choices=DATASET_NAMES)
+    dataset: str = option("coma", help="the dataset trained on", choices=MODEL_DATASETS)
     # paper §4: 40 frames; (35, 45) for the variable-length model of App. A
     num_frames: object = NUM_FRAMES
     num_diffusion_steps: int = NUM_DIFFUSION_STEPS  # paper §4: T = 2000
@@ -307,6 +308,13 @@ class EvaluatorTraining(Optimisation):
     dataset: str = "coma"
     classifier_type: str = "I"
     hidden: int = 128  # §5: one LSTM layer; its width is our choice
+    # "lstm": the IC of §5; "cnn": the second reader of the coverage protocol (issue
+    # 58), a temporal CNN of ``hidden`` channels (models.classifier)
+    architecture: str = option(
+        "lstm",
+        help="evaluator: the IC's LSTM (§5) or the second reader's temporal CNN",
+        choices=ARCHITECTURES,
+    )
     # the face-world chapter: motion generalises to unseen faces, absolute coordinates
     # do not
     inputs: str = "motion"

@@ -27,6 +27,8 @@ SHIPPED = {
         for d in ("coma", "bu", "coma+bu")
         for c in ("I", "S")
     },
+    # issue 58: the second reader of the coverage protocol
+    "ic_coma_I_cnn": ("evaluator", {"architecture": "cnn"}),
     "actor_coma": ("actor", {}),
     "actor_bu": ("actor", {"dataset": "bu"}),
     "motion3dgan_coma": ("motion3dgan", {}),
