@@ -1,28 +1,30 @@
 """What makes the denoiser under-produce wide and rare expressions?  Ablations of its
-training (issue 43).
+training (issues 43 and 58).
 
-Usage: python benchmarks/denoiser_ablation.py [--dataset coma] [--steps 3000] [--only
-NAME ...] [--train-only]
-                                              [--sample-steps 500] [--n N] [--save NAME]
+Usage: python benchmarks/denoiser_ablation.py [--dataset coma] [--steps 6000] [--only
+NAME ...] [--train-only] [--sample-steps 500] [--n 64] [--seeds 0 1 2 3 4] [--save NAME]
 
-Each row trains the shipped denoiser's recipe (facelib/training/settings.py, DenoiserTraining) with
-one change, at a reduced budget (``--steps``), into the cache
-(``<cache>/denoiser_ablation/NAME``; a finished run is reused, a stopped one resumed),
-then measures its unconditional samples (``--n``, default the test split's size, at the
-command line's default ``--sample-steps``) with the coverage protocol of the evaluation
-chapter (Evaluator.coverage: label mix, amplitudes per region,
-precision/recall/density/coverage in the IC's feature space) and FID against the
-training split, with 95 % intervals, and the training's wall time.  The held-out losses
-per noise-level bucket (recipes.DenoiserRecipe.validate, every 500 steps) go to a second
+Each row trains the shipped denoiser's recipe (facelib/training/settings.py,
+DenoiserTraining) with one change, at a reduced budget (``--steps``, a quarter of the
+recipe's), into the cache (``<cache>/denoiser_ablation/<dataset>_<steps>_NAME``; a
+finished run is reused, a stopped one resumed), then measures it with the population
+protocol of the evaluation chapter (evaluation.population_gap): ``--n`` unconditional
+samples for each of ``--seeds`` pooled, at the command line's default
+``--sample-steps``; per region the median and 90th percentile of each sequence's largest
+motion minus the reference population's (50 new people), with 95 % intervals by person;
+the label mix by both readers beside real sets' 95th percentile; the denoising loss at
+t = 200 on the training split, on new takes of its people and on new people
+(evaluation.denoising_loss); and the training's wall time.  The held-out losses per
+noise-level bucket (recipes.DenoiserRecipe.validate, every 500 steps) go to a second
 table, NAME_curves.
 
 Training runs can be spread over processes (each with OMP_NUM_THREADS=1) with --only and
---train-only; the final run, without them, trains nothing that is done and measures
-  every row:
+--train-only; a run with --save measures the rows named (all without --only) and trains
+nothing that is done:
 
-    OMP_NUM_THREADS=1 python benchmarks/denoiser_ablation.py --train-only --only
-    baseline x0 ... &
-    python benchmarks/denoiser_ablation.py --save denoiser_ablation        # about 3 h of training in all on 2 cores
+    OMP_NUM_THREADS=1 python benchmarks/denoiser_ablation.py --train-only --only baseline crowd &
+    OMP_NUM_THREADS=1 python benchmarks/denoiser_ablation.py --train-only --only motion_weight dropout &
+    python benchmarks/denoiser_ablation.py --only baseline crowd motion_weight dropout --save denoiser_screen
 """
 
 import argparse
@@ -30,6 +32,7 @@ import dataclasses
 import json
 import shutil
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -54,18 +57,62 @@ VARIANTS = {
     "deep": ("depth 6", {}, {"depth": 6}),
     "x4": ("4x the steps", {"steps_factor": 4}, {}),
     "x8": ("8x the steps", {"steps_factor": 8}, {}),
+    # issue 58: data and regularisation, representation
+    "crowd": (
+        "5x the people: CoMA's 9 and 36 more (coma+crowd, 2248 sequences)",
+        {"dataset": "coma+crowd"},
+        {},
+    ),
+    "world_faces": (
+        "anatomy pool + 500 new faces of the world (recipes.WORLD_ANATOMIES)",
+        {"anatomy_pool": ("coma", "bu", "world")},
+        {},
+    ),
+    "motion_weight": (
+        "the residual's moving part weighs 4x its static part (motion_weight 4)",
+        {"motion_weight": 4.0},
+        {},
+    ),
+    "dropout": ("dropout 0.1 in the transformer", {}, {"dropout": 0.1}),
+    "weight_decay": ("weight decay 0.05 (AdamW)", {"weight_decay": 0.05}, {}),
 }
+# the stored table's rows (issue 58); the other VARIANTS (issue 43's) run with --only
+TABLE_ROWS = (
+    "baseline",
+    "x4",
+    "crowd",
+    "world_faces",
+    "motion_weight",
+    "dropout",
+    "weight_decay",
+)
 REGIONS = metrics.AMPLITUDE_REGIONS
+READERS = evaluation.ARCHITECTURES
+# the held-out loss read at this step (of T = 2000) in the table; the curves hold all
+LOSS_TIME = 200
 COLUMNS = (
-    ["row", "change", "training steps", "label TV", "real subsets' TV p95"]
-    + [f"{r} p90 (mm)" for r in REGIONS]
-    + [f"{r} KS p vs test" for r in REGIONS]
+    ["row", "change", "training steps"]
     + [
         c
-        for name in ("precision", "recall", "density", "coverage")
-        for c in (name, "95 % interval")
+        for r in REGIONS
+        for q in evaluation.POPULATION_PERCENTILES
+        for c in (f"{r} p{q} gap (mm)", "95 % interval")
     ]
-    + ["FID", "FID 95 % interval", "training seconds", "sampling seconds"]
+    + [
+        c
+        for reader in READERS
+        for c in (
+            f"label TV ({reader})",
+            "real sets' p95",
+            f"largest share / reference ({reader})",
+            "real sets' p95 ",
+        )
+    ]
+    + [
+        f"loss at t = {LOSS_TIME}, {split}"
+        for split in ("training split", "new takes", "new people")
+    ]
+    + ["training seconds", "sampling seconds"]
 )
 
 
@@ -79,7 +126,9 @@ def recipe_for(name, dataset, steps):
     _, settings, architecture = VARIANTS[name]
     settings = dict(settings)
     steps *= settings.pop("steps_factor", 1)
-    chosen = training.settings_for("denoiser", dataset=dataset, steps=steps, **settings)
+    chosen = training.settings_for(
+        "denoiser", **{"dataset": dataset, "steps": steps, **settings}
+    )
     model_config = None
     if architecture:
         model_config = DenoiserConfig(
@@ -120,15 +169,20 @@ def trained(name, dataset, steps):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--dataset", default="coma", choices=["coma", "bu"])
+    parser.add_argument(
+        "--dataset", default="coma", choices=list(config.REFERENCE_POPULATIONS)
+    )
     parser.add_argument(
         "--steps",
         type=int,
-        default=3000,
-        help="training steps of a row (a quarter of the full)",
+        default=6000,
+        help="training steps of a row (a quarter of the recipe's)",
     )
     parser.add_argument(
-        "--only", nargs="+", choices=list(VARIANTS), help="these rows only"
+        "--only",
+        nargs="+",
+        choices=list(VARIANTS),
+        help=f"these rows (default: the table's, {', '.join(TABLE_ROWS)})",
     )
     parser.add_argument(
         "--train-only", action="store_true", help="train the rows, measure nothing"
@@ -139,69 +193,31 @@ def main():
         default=tasks.Unconditional().steps,
         help="respaced reverse steps of the samples (default: the command line's)",
     )
-    parser.add_argument(
-        "--n",
-        type=int,
-        default=None,
-        help="samples per row (default: the test split's size)",
-    )
+    parser.add_argument("--n", type=int, default=64, help="samples per seed")
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
     results.add_save_options(parser)
     args = parser.parse_args()
     results.check_save_args(args)
-    if args.save and (args.only or args.train_only):
-        parser.error(
-            "--only and --train-only measure part of the table: they cannot --save it"
-        )
-    names = args.only or list(VARIANTS)
+    if args.save and args.train_only:
+        parser.error("--train-only measures nothing: it cannot --save")
+    names = args.only or list(TABLE_ROWS)
     t_start = time.perf_counter()
     stems = {name: trained(name, args.dataset, args.steps) for name in names}
     if args.train_only:
         return
-    ev = evaluation.load_evaluator(args.dataset, "I")
-    test = data.load_dataset(args.dataset, "test")
-    n = args.n or len(test)
-    rows, curves = [], []
+    splits = {
+        "training split": data.load_dataset(args.dataset, "train"),
+        "new takes": data.load_dataset(config.NEW_TAKES[args.dataset], "train"),
+        "new people": data.load_dataset(
+            config.REFERENCE_POPULATIONS[args.dataset], "test"
+        ),
+    }
+    rows, curves, buckets = [], [], []
     for name in names:
-        denoiser = tasks.load_denoiser(str(stems[name]))
-        meta = denoiser.meta
-        t0 = time.perf_counter()
-        x = tasks.unconditional(
-            n, steps=args.sample_steps, seed=0, denoiser=denoiser, progress=False
-        )
-        sampling = time.perf_counter() - t0
-        measured = ev.coverage(x)
-        if not rows:
-            t = measured["test"]
-            scores = ev.score(
-                test.landmarks, test.targets("I"), intervals=True, num_resamples=200
-            )
-            rows.append(
-                _row(
-                    "test split",
-                    "held-out real sequences (the reference)",
-                    "",
-                    t,
-                    scores,
-                    0.0,
-                    0.0,
-                )
-            )
-        scores = ev.score(x, np.zeros(len(x), int), intervals=True, num_resamples=200)
-        rows.append(
-            _row(
-                name,
-                VARIANTS[name][0],
-                meta["training"]["steps"],
-                measured["generated"],
-                scores,
-                meta.get("wall_time_s"),
-                sampling,
-            )
-        )
-        print(json.dumps(rows[-1]), flush=True)
-        if (
-            "held_out" not in meta["history"]
-        ):  # a copy of a checkpoint trained before the curves were logged
+        row, meta = measured(name, stems[name], args, splits)
+        rows.append(row)
+        print(json.dumps(row), flush=True)
+        if "held_out" not in meta["history"]:  # a copy of the shipped checkpoint
             continue
         held_out = meta["history"]["held_out"]
         buckets = [k for k in held_out if k != "step"]
@@ -213,27 +229,33 @@ def main():
         run = results.Run(
             allow_dirty=args.allow_dirty,
             settings=(training.DenoiserTraining(), tasks.Unconditional()),
-            checkpoints=[f"ic_{args.dataset}_I"],
-            seeds=[0],
-            n=n,
+            checkpoints=[f"ic_{args.dataset}_I", f"ic_{args.dataset}_I_cnn"],
+            seeds=args.seeds,
+            n=args.n,
             steps=[args.sample_steps],
             wall_time_s=time.perf_counter() - t_start,
         )
         path = results.save_result(
             args.save,
-            f"Denoiser ablations ({args.dataset}): coverage of unconditional samples, "
-            f"{args.steps} training steps a row (x4, x8: 4 and 8 times)",
+            f"Denoiser ablations ({args.dataset}) against a reference population,"
+            f" {args.steps} training steps a row (x4, x8: 4 and 8 times)",
             COLUMNS,
             rows,
             run,
             notes=(
                 f"each row: the shipped recipe with one change, {args.steps} steps (x4,"
-                f" x8: 4 and 8 times as many), batch 64, seed 0; {n} samples at"
-                f" {args.sample_steps} respaced steps, seed 0; coverage as in"
-                " coverage_unconditional (against the training split, type-I IC"
-                " features, k = 5); training seconds as each run recorded them (runs"
-                " side by side with one thread each, x8 alone with two; x4 is the"
-                " checkpoint shipped before issue 43, timed beside other runs)"
+                f" x8: 4 and 8 times as many), batch 64, seed 0; {args.n} samples for"
+                f" each of the seeds {args.seeds} pooled, at {args.sample_steps}"
+                " respaced steps. Amplitude gaps: generated minus the reference"
+                " population (coma_people, 50 new people), 95 % interval by"
+                " metrics.population_gap (samples resampled, the reference by person);"
+                " label mix read by the IC (lstm) and a temporal CNN (cnn) beside the"
+                " 95th percentile of real sets of the same size"
+                " (metrics.label_mix_gap). Loss: evaluation.denoising_loss at"
+                f" t = {LOSS_TIME} on the training split, on new takes of its people"
+                " (coma_retakes train) and on the reference population. Training"
+                " seconds as each run recorded them (runs side by side with one"
+                " thread each)"
             ),
         )
         print(f"saved {path}")
@@ -253,18 +275,60 @@ def main():
         print(f"saved {path}")
 
 
-def _row(name, change, steps, measured, scores, training_seconds, sampling_seconds):
-    amp = measured["amplitudes"]
-    return (
-        [name, change, steps, measured["label_tv"], measured["label_tv_real_p95"]]
-        + [amp[r]["p90"] for r in REGIONS]
-        + [amp[r]["ks_p_vs_test"] for r in REGIONS]
-        + [
-            v
-            for key in ("precision", "recall", "density", "coverage")
-            for v in (measured[key], list(measured[key + "_ci"]))
+def measured(name, stem, args, splits):
+    """(table row, checkpoint metadata) of row ``name`` trained at ``stem``: its samples
+    measured by the population protocol, or the measurement a run with the same sample
+    settings stored beside the checkpoint (``<stem>.row.json``; the checkpoint's sha256
+    keys it)."""
+    denoiser = tasks.load_denoiser(str(stem))
+    meta = denoiser.meta
+    key = {"sha256": meta["sha256"], "n": args.n, "seeds": args.seeds,
+           "sample_steps": args.sample_steps}
+    cache = Path(str(stem) + ".row.json")
+    if cache.exists() and json.loads(cache.read_text())["key"] == key:
+        return json.loads(cache.read_text())["row"], meta
+    t0 = time.perf_counter()
+    x = np.concatenate(
+        [
+            tasks.unconditional(
+                args.n, steps=args.sample_steps, seed=s, denoiser=denoiser,
+                progress=False,
+            )
+            for s in args.seeds
         ]
-        + [scores["fid"], list(scores["fid_ci"]), training_seconds, sampling_seconds]
+    )
+    sampling = time.perf_counter() - t0
+    gap = evaluation.population_gap(x, args.dataset, READERS)
+    losses = [
+        evaluation.denoising_loss(denoiser, split.landmarks, (LOSS_TIME,))[LOSS_TIME]
+        for split in splits.values()
+    ]
+    row = _row(name, meta["training"]["steps"], gap, losses, meta.get("wall_time_s"),
+               sampling)
+    row = json.loads(json.dumps(row, default=lambda v: v.tolist()))  # numpy -> Python
+    cache.write_text(json.dumps({"key": key, "row": row}))
+    return row, meta
+
+
+def _row(name, steps, gap, losses, training_seconds, sampling_seconds):
+    amplitudes = [
+        v
+        for r in REGIONS
+        for q in evaluation.POPULATION_PERCENTILES
+        for v in (gap["amplitudes"][r][f"p{q}"][0], list(gap["amplitudes"][r][f"p{q}"][1]))
+    ]
+    mix = [
+        v
+        for reader in READERS
+        for key in ("tv", "tv_real", "max_ratio", "max_ratio_real")
+        for v in (gap["label_mix"][reader][key],)
+    ]
+    return (
+        [name, VARIANTS[name][0], steps]
+        + amplitudes
+        + mix
+        + losses
+        + [training_seconds, sampling_seconds]
     )
 
 

@@ -89,6 +89,15 @@ def main():
         ]
     )
     sampled = time.perf_counter() - t_start
+    per_seed = [
+        [seed]
+        + [
+            float(np.percentile(values[k * args.n : (k + 1) * args.n], q))
+            for values in metrics.amplitudes(x).values()
+            for q in evaluation.POPULATION_PERCENTILES
+        ]
+        for k, seed in enumerate(args.seeds)
+    ]
     print(f"{len(x)} samples ({len(args.seeds)} seeds x {args.n}) in {sampled:.0f} s")
     gap = evaluation.population_gap(x, num_resamples=args.resamples)
     rows = []
@@ -118,7 +127,7 @@ def main():
     if args.loss:
         splits = (
             ("coma", "train"),
-            ("coma_retakes", "train"),
+            (config.NEW_TAKES["coma"], "train"),
             ("coma", "test"),
             (config.REFERENCE_POPULATIONS["coma"], "test"),
         )
@@ -138,21 +147,22 @@ def main():
             f"  {row[3]}"
         )
     if args.save:
+        run = results.Run(
+            allow_dirty=args.allow_dirty,
+            settings=(tasks.Unconditional(),),
+            checkpoints=[args.checkpoint, "ic_coma_I", "ic_coma_I_cnn"],
+            seeds=args.seeds,
+            n=args.n,
+            steps=[args.steps],
+            wall_time_s=time.perf_counter() - t_start,
+        )
         path = results.save_result(
             args.save,
             f"Coverage of unconditional samples against a reference population"
             f" ({args.checkpoint}, {len(args.seeds)} seeds x {args.n})",
             ["measure", "generated - reference", "95 % interval", "calibration / note"],
             rows,
-            results.Run(
-                allow_dirty=args.allow_dirty,
-                settings=(tasks.Unconditional(),),
-                checkpoints=[args.checkpoint, "ic_coma_I", "ic_coma_I_cnn"],
-                seeds=args.seeds,
-                n=args.n,
-                steps=[args.steps],
-                wall_time_s=time.perf_counter() - t_start,
-            ),
+            run,
             notes=(
                 "amplitudes: generated minus reference (coma_people, 50 people), interval"
                 " by metrics.population_gap; calibration: the share of real stand-ins"
@@ -163,6 +173,27 @@ def main():
             ),
         )
         print(f"saved {path}")
+        path = results.save_result(
+            args.save + "_seeds",
+            f"Each seed's amplitude percentiles ({args.checkpoint}, {args.n} samples a"
+            " seed) and the reference population's",
+            ["seed"]
+            + [f"{r} p{q} (mm)" for r in REGIONS for q in evaluation.POPULATION_PERCENTILES],
+            per_seed + [["reference"] + reference_percentiles()],
+            run,
+            notes="one row per seed of the pooled samples; the last row: coma_people",
+        )
+        print(f"saved {path}")
+
+
+def reference_percentiles():
+    """The reference population's amplitude percentiles, region by region (mm)."""
+    reference = data.load_dataset(config.REFERENCE_POPULATIONS["coma"], "test")
+    return [
+        float(np.percentile(values, q))
+        for values in metrics.amplitudes(reference.landmarks).values()
+        for q in evaluation.POPULATION_PERCENTILES
+    ]
 
 
 if __name__ == "__main__":

@@ -155,11 +155,29 @@ DATASETS = {
         style_blend_max=0.22,
         first_take=5,
     ),
+    # Issue 58's data ablation: 36 more people performing CoMA's labels by CoMA's
+    # recipes, 4 takes each as CoMA's people (training only: "coma+crowd" trains on
+    # CoMA's 9 training people and these, and keeps CoMA's test split)
+    "coma_crowd": DatasetSpec(
+        "coma_crowd",
+        "coma",
+        num_subjects=36,
+        num_sequences=1728,
+        num_test_subjects=0,
+        takes_per_pair=4,
+        seed=4004,
+        style_gain_sigma=0.45,
+        style_leak_probability=0.9,
+        style_leak_max=0.4,
+        style_blend_max=0.22,
+    ),
 }
 # the datasets made to evaluate with, never to train or sample on
 EVALUATION_DATASETS = ("coma_people", "coma_retakes")
 # the reference population of a dataset's coverage protocol (metrics.population_gap)
 REFERENCE_POPULATIONS = {"coma": "coma_people"}
+# new takes of a dataset's training people (its train split): replay against anatomy
+NEW_TAKES = {"coma": "coma_retakes"}
 SPLITS = ("train", "test", "all")
 
 

@@ -48,7 +48,7 @@ _SOURCE_FILES = (
 
 
 # paper §5.2: "merging CoMA and BU-4DFE" (18 actions)
-MERGED_DATASETS = {"coma+bu": ("coma", "bu")}
+MERGED_DATASETS = {"coma+bu": ("coma", "bu"), "coma+crowd": ("coma", "coma_crowd")}
 DATASET_NAMES = (*config.DATASETS, *MERGED_DATASETS)
 # the datasets a model is trained or sampled on (the settings' choices)
 MODEL_DATASETS = tuple(n for n in DATASET_NAMES if n not in config.EVALUATION_DATASETS)
@@ -545,10 +545,14 @@ def merge(parts, name):
         raise ValueError(
             "datasets to merge must be the same split with the same number of frames"
         )
-    names = tuple(label for p in parts for label in p.label_names)
-    if len(set(names)) != len(names):
-        raise ValueError(f"datasets to merge share labels: {names}")
-    label_offsets = np.cumsum([0] + [len(p.label_names) for p in parts])
+    if all(p.label_names == parts[0].label_names for p in parts):
+        # more people performing the same labels
+        names, label_offsets = tuple(parts[0].label_names), np.zeros(len(parts), int)
+    else:
+        names = tuple(label for p in parts for label in p.label_names)
+        if len(set(names)) != len(names):
+            raise ValueError(f"datasets to merge share some labels: {names}")
+        label_offsets = np.cumsum([0] + [len(p.label_names) for p in parts])
     subject_offsets = np.cumsum([0] + [len(p.identity_coeffs) for p in parts])
     cat = lambda key: np.concatenate([getattr(p, key) for p in parts])
     return FaceDataset(

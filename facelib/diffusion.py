@@ -145,6 +145,18 @@ def masked_mean(err, mask=None):
     return (err * m).sum() / (m.sum() * err.shape[2] * err.shape[3])
 
 
+def motion_weighted(err, weight, mask=None):
+    """The residual err (B, F, 68, 3) split into its mean over the (valid) frames, the
+    static part (the sequence's anatomy and held pose), and what moves, each squared:
+    m^2 + weight (err - m)^2.  Averaged over frames it is ||err||^2 at weight 1 (the
+    cross term averages to zero); weight > 1 counts an error in the motion more than one
+    in the anatomy (issue 58's representation ablation)."""
+    m = torch.ones(err.shape[:2], dtype=err.dtype, device=err.device) if mask is None else mask.to(err.dtype)
+    m = m[:, :, None, None]
+    static = (err * m).sum(1, keepdim=True) / m.sum(1, keepdim=True)
+    return static**2 + weight * (err - static) ** 2
+
+
 def device_of(network):
     """The device of a module's first parameter or buffer (None for a plain function or
     an empty module)."""
@@ -703,11 +715,13 @@ class GaussianDiffusion:
         eps=None,
         prediction="eps",
         min_snr_gamma=None,
+        motion_weight=1.0,
         **model_inputs,
     ):
         """The simple loss of Eq. 8, E_{t, x_0, eps} ||eps - eps_theta(x_t, t)||^2 (mean
         over valid entries), or with ``prediction`` "x0" / "v" or ``min_snr_gamma`` that
-        objective (:meth:`loss_weights`).
+        objective (:meth:`loss_weights`); ``motion_weight`` != 1 weighs the residual's
+        moving part against its static part (:func:`motion_weighted`).
 
         t (B,) and eps (like x0) are drawn from ``generator`` unless given;
         ``model_inputs`` (a conditional denoiser's ``labels``) go to the model, which
@@ -729,7 +743,10 @@ class GaussianDiffusion:
             mask,
             **model_inputs,
         )
-        err = (eps - pred) ** 2
+        if motion_weight == 1.0:
+            err = (eps - pred) ** 2
+        else:
+            err = motion_weighted(eps - pred, motion_weight, mask)
         if prediction != "eps" or min_snr_gamma is not None:
             weights = self.loss_weights(t.cpu().numpy(), prediction, min_snr_gamma)
             err = err * torch.as_tensor(

@@ -158,6 +158,16 @@ def test_composed_performances_show_the_action_units_of_both_labels():
         data.composed_performances(bu, "happy", kind="apex")
 
 
+def test_more_people_of_the_same_labels_merge_into_one_label_set_and_keep_the_test_split():
+    coma, crowd = data.load_dataset("coma", "train"), data.load_dataset("coma_crowd", "train")
+    merged = data.load_dataset("coma+crowd", "train")
+    assert merged.label_names == coma.label_names and len(merged) == len(coma) + len(crowd)
+    np.testing.assert_array_equal(merged.labels, np.concatenate([coma.labels, crowd.labels]))
+    assert len(np.unique(merged.subjects)) == len(np.unique(coma.subjects)) + 36
+    np.testing.assert_array_equal(data.load_dataset("coma+crowd", "test").landmarks,
+                                  data.load_dataset("coma", "test").landmarks)
+
+
 def test_merged_dataset_keeps_every_sequence_face_label_and_split():
     for split in ("train", "test"):
         merged = data.load_dataset("coma+bu", split)

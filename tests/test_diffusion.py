@@ -176,6 +176,21 @@ def test_training_loss_ignores_padded_frames():
     assert loss.item() < 10  # the huge predictions on padded frames do not count
 
 
+def test_motion_weight_one_is_the_simple_loss_and_more_weighs_only_what_moves():
+    d = GaussianDiffusion(linear_betas(100))
+    x0, t, noise = torch.randn(3, 6, 68, 3), torch.tensor([5, 50, 90]), torch.randn(3, 6, 68, 3)
+    mask = torch.tensor([[True] * 6, [True] * 4 + [False] * 2, [True] * 6])
+    error = torch.randn(3, 6, 68, 3)
+    moving = error - (error * mask[:, :, None, None]).sum(1, keepdim=True) / mask.sum(1)[:, None, None, None]
+    loss = lambda err, w=1.0: d.training_loss(  # noqa: E731
+        lambda x, tt, m: noise + err, x0, t=t, eps=noise, mask=mask, motion_weight=w).item()
+    simple = d.training_loss(lambda x, tt, m: noise + error, x0, t=t, eps=noise, mask=mask).item()
+    assert loss(error) == pytest.approx(simple, rel=1e-6)
+    still = error[:, :1].expand(-1, 6, -1, -1)  # the same error on every frame: the anatomy's
+    assert loss(still, 4.0) == pytest.approx(loss(still), rel=1e-6)
+    assert loss(moving, 4.0) == pytest.approx(4 * loss(moving), rel=1e-5)  # zero mean over the valid frames
+
+
 def test_posterior_equals_the_bayes_product_of_gaussians():
     """q(x_{t-1}|x_t,x_0) ∝ q(x_t|x_{t-1}) q(x_{t-1}|x_0): precisions add, means are precision-weighted."""
     d = GaussianDiffusion(linear_betas(2000))

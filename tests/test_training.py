@@ -379,6 +379,20 @@ def test_a_denoiser_with_another_target_or_weighting_trains_and_samples_by_its_r
         tasks.load_denoiser(str(tmp_path / "d"))
 
 
+def test_the_motion_weight_reaches_the_loss_and_is_checked():
+    r, plain = _recipe(steps=2, motion_weight=4.0), _recipe(steps=2)
+    model = plain.build(torch.Generator().manual_seed(0))
+    with torch.no_grad():  # the same batch, noise and model: only the weighting differs
+        weighted = r.loss(model, training.Draws(torch.Generator().manual_seed(1), 8))[0].item()
+        simple = plain.loss(model, training.Draws(torch.Generator().manual_seed(1), 8))[0].item()
+    assert weighted > 1.5 * simple  # a fresh model's error moves from frame to frame
+    for bad in (0, -1.0, float("nan")):
+        with pytest.raises(ValueError, match="motion_weight must be a number >= 0.01"):
+            training.DenoiserTraining(motion_weight=bad)
+    with pytest.raises(ValueError, match="motion_weight weighs the DDPM's loss, not the flow's"):
+        training.DenoiserTraining(schedule="flow", prediction="u", motion_weight=2.0)
+
+
 def test_a_rectified_flow_trains_on_the_same_network_and_loop_and_samples_from_its_checkpoint(tmp_path):
     from facelib import tasks
     from facelib.flow import RectifiedFlow

@@ -21,7 +21,7 @@ import torch
 from torch import nn
 
 from .. import config, data, deformation, srvf
-from ..face import get_template
+from ..face import Face, aus, get_template, sample_identity
 from ..checkpoints import checkpoint_name
 from ..diffusion import GaussianDiffusion, ddim_step, halving_steps, named_betas
 from ..flow import RectifiedFlow
@@ -94,11 +94,36 @@ class Recipe:
 
 
 # --------------------------------------------------------------------------- the DDPM
+# the pool entry "world": this many new identities drawn from the world's identity
+# model (face.sample_identity, seeds [WORLD_ANATOMY_SEED, k]), in no dataset
+WORLD_ANATOMIES = 500
+WORLD_ANATOMY_SEED = 5005
+
+
 def training_anatomies(datasets):
     """Neutral landmarks (K, 68, 3) in mm of every training subject of the given
-    datasets."""
+    datasets ("world": WORLD_ANATOMIES identities of no dataset)."""
     return np.concatenate(
-        [data.load_dataset(name, "train").subject_neutrals() for name in datasets]
+        [
+            world_anatomies()
+            if name == "world"
+            else data.load_dataset(name, "train").subject_neutrals()
+            for name in datasets
+        ]
+    )
+
+
+def world_anatomies():
+    """Neutral landmarks (WORLD_ANATOMIES, 68, 3) in mm of new identities of the
+    world."""
+    zero = np.zeros(aus.NUM_AUS)
+    return np.stack(
+        [
+            Face(sample_identity(np.random.default_rng([WORLD_ANATOMY_SEED, k])))
+            .landmarks(zero)
+            .astype(np.float32)
+            for k in range(WORLD_ANATOMIES)
+        ]
     )
 
 
@@ -321,6 +346,7 @@ class DenoiserRecipe(Recipe):
                 "t": draws.randint(1, self.settings.num_diffusion_steps + 1),
                 "prediction": self.settings.prediction,
                 "min_snr_gamma": self.settings.min_snr_gamma,
+                "motion_weight": self.settings.motion_weight,
             }
         inputs = {}
         if self.architecture.known_input:

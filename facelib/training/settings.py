@@ -122,6 +122,9 @@ class DenoiserTraining(Optimisation):
     prediction: str = "eps"
     # paper: None (the simple loss); a number: min-SNR-gamma (Hang et al. 2023)
     min_snr_gamma: float | None = None
+    # paper: 1 (the simple loss); > 1 weighs the error in what moves over the error in
+    # the static anatomy (diffusion.motion_weighted)
+    motion_weight: float = 1.0
     # our option: probability that a training sequence is mirrored left to right
     mirror: float = 0.0
     # our choice: training faces of these datasets (9 + 81)
@@ -166,6 +169,9 @@ class DenoiserTraining(Optimisation):
             "condition_dropout", self.condition_dropout, include_one=False
         )
         check_probability("mirror", self.mirror)
+        check_number("motion_weight", self.motion_weight, low=0.01)
+        if self.motion_weight != 1 and self.schedule == "flow":
+            raise ValueError("motion_weight weighs the DDPM's loss, not the flow's")
         check_prediction(self.prediction)
         if self.schedule == "flow" and self.prediction != "u":
             raise ValueError(
