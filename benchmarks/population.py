@@ -100,22 +100,21 @@ def main():
     ]
     print(f"{len(x)} samples ({len(args.seeds)} seeds x {args.n}) in {sampled:.0f} s")
     gap = evaluation.population_gap(x, num_resamples=args.resamples)
-    rows = []
+    rows = []  # measure, value, 95 % interval, real sets' p95, calibration
     passed = calibration(len(x), args.calibrate, args.resamples // 4) if args.calibrate else {}
     for region in REGIONS:
         for q in evaluation.POPULATION_PERCENTILES:
             value, ci = gap["amplitudes"][region][f"p{q}"]
-            share = passed.get((region, q))
-            rows.append(
-                [f"{region} p{q} (mm)", value, list(ci), "" if share is None else share]
-            )
+            share = passed.get((region, q), "")
+            rows.append([f"{region} p{q} (mm)", value, list(ci), "", share])
     for reader, mix in gap["label_mix"].items():
-        rows.append([f"label mix TV ({reader})", mix["tv"], [0.0, mix["tv_real"]], ""])
+        rows.append([f"label mix TV ({reader})", mix["tv"], "", mix["tv_real"], ""])
         rows.append(
             [
                 f"largest label share / reference ({reader})",
                 mix["max_ratio"],
-                [0.0, mix["max_ratio_real"]],
+                "",
+                mix["max_ratio_real"],
                 "",
             ]
         )
@@ -125,27 +124,24 @@ def main():
             + ", ".join(f"{c} {v:.2f}" for c, v in zip(mix["class_names"], shares))
         )
     if args.loss:
-        splits = (
-            ("coma", "train"),
-            (config.NEW_TAKES["coma"], "train"),
-            ("coma", "test"),
-            (config.REFERENCE_POPULATIONS["coma"], "test"),
-        )
-        losses = {
-            split: evaluation.denoising_loss(
-                denoiser, data.load_dataset(*split).landmarks
-            )
-            for split in splits
+        splits = {
+            "training split": ("coma", "train"),
+            "new takes": (config.NEW_TAKES["coma"], "train"),
+            "test split": ("coma", "test"),
+            "new people": (config.REFERENCE_POPULATIONS["coma"], "test"),
         }
-        for name, split in splits:
-            for t, loss in losses[name, split].items():
-                base = losses["coma", "train"][t]
-                rows.append([f"loss at t = {t}, {name} {split} / train", loss / base, "", base])
+        losses = {
+            name: evaluation.denoising_loss(denoiser, data.load_dataset(*split).landmarks)
+            for name, split in splits.items()
+        }
+        for t, base in losses["training split"].items():
+            rows.append([f"loss at t = {t}, training split", base, "", "", ""])
+            for name in list(splits)[1:]:
+                ratio = losses[name][t] / base
+                rows.append([f"loss at t = {t}, {name} / training split", ratio, "", "", ""])
     for row in rows:
-        print(
-            f"{row[0]:<48} {row[1]:8.3f}  {row[2] if row[2] == '' else '[%.3f, %.3f]' % tuple(row[2])}"
-            f"  {row[3]}"
-        )
+        interval = "" if row[2] == "" else "[%.3f, %.3f]" % tuple(row[2])
+        print(f"{row[0]:<48} {row[1]:8.4g}  {interval:<18} {row[3]!s:<8} {row[4]}")
     if args.save:
         run = results.Run(
             allow_dirty=args.allow_dirty,
@@ -160,16 +156,16 @@ def main():
             args.save,
             f"Coverage of unconditional samples against a reference population"
             f" ({args.checkpoint}, {len(args.seeds)} seeds x {args.n})",
-            ["measure", "generated - reference", "95 % interval", "calibration / note"],
+            ["measure", "generated - reference", "95 % interval", "real sets' p95", "calibration"],
             rows,
             run,
             notes=(
                 "amplitudes: generated minus reference (coma_people, 50 people), interval"
                 " by metrics.population_gap; calibration: the share of real stand-ins"
                 " (25 people against the other 25) whose interval holds 0. Label mix"
-                " rows: the value and [0, the 95th percentile of real sets of the same"
-                " size]. Loss rows: the ratio to the training split's loss, and that"
-                " loss"
+                " rows: the value and the 95th percentile of real sets of the same size"
+                " (metrics.label_mix_gap). Loss rows (evaluation.denoising_loss): the"
+                " training split's loss at t, then each other set's as a ratio to it"
             ),
         )
         print(f"saved {path}")
