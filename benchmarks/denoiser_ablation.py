@@ -103,9 +103,9 @@ COLUMNS = (
         for reader in READERS
         for c in (
             f"label TV ({reader})",
-            "real sets' p95",
+            f"label TV, real sets' p95 ({reader})",
             f"largest share / reference ({reader})",
-            "real sets' p95 ",
+            f"largest share, real sets' p95 ({reader})",
         )
     ]
     + [
