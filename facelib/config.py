@@ -82,6 +82,15 @@ class DatasetSpec:
     first_take: int = 0
 
 
+# the style spread of CoMA-like people (the "coma" comment below says why), shared by
+# every dataset of more CoMA-like people
+COMA_STYLES = dict(
+    style_gain_sigma=0.45,
+    style_leak_probability=0.9,
+    style_leak_max=0.4,
+    style_blend_max=0.22,
+)
+
 DATASETS = {
     # Paper §4: 689 CoMA sequences from 12 subjects performing 12 actions.  CoMA's
     # labels are instructions ("lips up") that subjects interpret freely: our choice of
@@ -99,10 +108,7 @@ DATASETS = {
         num_test_subjects=3,
         takes_per_pair=4,
         seed=1001,
-        style_gain_sigma=0.45,
-        style_leak_probability=0.9,
-        style_leak_max=0.4,
-        style_blend_max=0.22,
+        **COMA_STYLES,
     ),
     # Paper §4: 606 BU-4DFE recordings of 101 subjects x 6 emotions, each cut into an
     # N2E and an E2N sequence: 1212 sequences.  Our choice: 20 subjects held out for
@@ -132,10 +138,7 @@ DATASETS = {
         num_test_subjects=50,
         takes_per_pair=2,
         seed=3003,
-        style_gain_sigma=0.45,
-        style_leak_probability=0.9,
-        style_leak_max=0.4,
-        style_blend_max=0.22,
+        **COMA_STYLES,
     ),
     # Issue 58: new takes of CoMA's own people (its seed, its styles; takes 5 and 6,
     # past CoMA's last): its train split holds new takes of the people a denoiser
@@ -149,10 +152,7 @@ DATASETS = {
         num_test_subjects=3,
         takes_per_pair=2,
         seed=1001,
-        style_gain_sigma=0.45,
-        style_leak_probability=0.9,
-        style_leak_max=0.4,
-        style_blend_max=0.22,
+        **COMA_STYLES,
         first_take=5,
     ),
     # Issue 58's data ablation: 36 more people performing CoMA's labels by CoMA's
@@ -166,10 +166,7 @@ DATASETS = {
         num_test_subjects=0,
         takes_per_pair=4,
         seed=4004,
-        style_gain_sigma=0.45,
-        style_leak_probability=0.9,
-        style_leak_max=0.4,
-        style_blend_max=0.22,
+        **COMA_STYLES,
     ),
 }
 # the datasets made to evaluate with, never to train or sample on
