@@ -51,7 +51,13 @@ _SOURCE_FILES = (
 MERGED_DATASETS = {"coma+bu": ("coma", "bu"), "coma+crowd": ("coma", "coma_crowd")}
 DATASET_NAMES = (*config.DATASETS, *MERGED_DATASETS)
 # the datasets a model is trained or sampled on (the settings' choices)
-MODEL_DATASETS = tuple(n for n in DATASET_NAMES if n not in config.EVALUATION_DATASETS)
+# (not the evaluation-only ones, nor a part without test people, such as coma_crowd)
+MODEL_DATASETS = tuple(
+    n
+    for n in DATASET_NAMES
+    if n not in config.EVALUATION_DATASETS
+    and (n in MERGED_DATASETS or config.DATASETS[n].num_test_subjects > 0)
+)
 
 
 def check_dataset_name(name):

@@ -151,8 +151,9 @@ def motion_weighted(err, weight, mask=None):
     m^2 + weight (err - m)^2.  Averaged over frames it is ||err||^2 at weight 1 (the
     cross term averages to zero); weight > 1 counts an error in the motion more than one
     in the anatomy (issue 58's representation ablation)."""
-    m = torch.ones(err.shape[:2], dtype=err.dtype, device=err.device) if mask is None else mask.to(err.dtype)
-    m = m[:, :, None, None]
+    if mask is None:
+        mask = torch.ones(err.shape[:2], dtype=torch.bool, device=err.device)
+    m = mask.to(err.dtype)[:, :, None, None]
     static = (err * m).sum(1, keepdim=True) / m.sum(1, keepdim=True)
     return static**2 + weight * (err - static) ** 2
 

@@ -483,7 +483,7 @@ def test_every_train_option_sets_its_field_in_every_recipe_that_has_it(name):
 
 def test_a_recipe_setting_with_choices_refuses_another_value_by_name():
     """--set reaches the fields that have an option too; their choices are checked by the settings themselves."""
-    for model, assignment, allowed in (("guide", "dataset=coma2", "coma', 'bu', 'coma+bu"),
+    for model, assignment, allowed in (("guide", "dataset=coma2", "coma', 'bu', 'coma+bu', 'coma+crowd'"),
                                        ("deformer", "method=ours2", "ours', 'no_attention'"),
                                        ("deformer", "split=people", "identity', 'expression'"),
                                        ("evaluator", "classifier_type=X", "I', 'S'")):
