@@ -77,6 +77,11 @@ VARIANTS = {
         {},
     ),
     "dropout": ("dropout 0.1 in the transformer", {}, {"dropout": 0.1}),
+    "temporal_prior": (
+        "the Gaussian part over whole sequences, a variance per temporal frequency",
+        {"temporal_prior": True},
+        {},
+    ),
     "weight_decay": ("weight decay 0.05 (AdamW)", {"weight_decay": 0.05}, {}),
 }
 # the stored table's rows (issue 58); the other VARIANTS (issue 43's) run with --only
@@ -137,6 +142,7 @@ def recipe_for(name, dataset, steps):
             num_diffusion_steps=chosen.num_diffusion_steps,
             schedule=chosen.schedule,
             prediction=chosen.prediction,
+            prior_length=chosen.num_frames if chosen.temporal_prior else 0,
             **architecture,
         )
     return training.DenoiserRecipe(chosen, model_config)

@@ -158,7 +158,8 @@ def train_settings(args):
     fast-mode ones) changed by its options and every --set NAME=VALUE."""
     given = {n: getattr(args, n) for n in RECIPE_OPTIONS if hasattr(args, n)}
     if args.variable_length:
-        given["num_frames"] = (35, 45)
+        # mixed lengths: the Gaussian part per frame (denoiser_coma_var's recipe)
+        given["num_frames"], given["temporal_prior"] = (35, 45), False
     if args.name == "all":
         if given or args.set:
             raise ValueError(

@@ -1,6 +1,8 @@
 """The bidirectional-transformer denoiser eps_theta (models/denoiser.py): any length, padding, attention, the
 Gaussian estimate, bad input."""
+import numpy as np
 import pytest
+import scipy.fft
 import torch
 
 from facelib.guidance import ClassifierFree
@@ -58,6 +60,66 @@ def test_gaussian_estimate_is_the_optimal_noise_estimate_for_gaussian_frames():
         optimum = 1 - ((1 - abar) / (abar * lam + 1 - abar)).mean().item()  # per-dimension posterior variance
         assert mse == pytest.approx(optimum, abs=0.01)
         assert mse < ((xt * (1 - abar) ** 0.5 - eps) ** 2).mean().item()  # beats the isotropic estimate
+
+
+def _dense_gaussian_eps(model, xt, t):
+    """E[eps | x_t] = sqrt(1 - abar) (abar S + (1 - abar) I)^-1 x_t with the whole
+    sequence's covariance S written out (frames x features), solved densely."""
+    length, features = model.prior_spectrum.shape
+    c = torch.as_tensor(scipy.fft.dct(np.eye(length), norm="ortho", axis=0))  # rows: DCT-II
+    u = model.prior_basis.double()
+    basis = torch.kron(c.T.contiguous(), u)  # columns: the Gaussian's eigenvectors
+    cov = basis @ torch.diag(model.prior_spectrum.double().reshape(-1)) @ basis.T
+    abar = float(model.alphas_bar[t])
+    a = abar * cov + (1 - abar) * torch.eye(len(cov), dtype=torch.float64)
+    flat = xt.double().reshape(len(xt), -1)
+    return ((1 - abar) ** 0.5 * torch.linalg.solve(a, flat.T).T).reshape(xt.shape)
+
+
+def test_the_temporal_gaussian_is_the_dense_posterior_of_its_sequence_covariance():
+    """prior_length: the Gaussian part is E[eps | x_t] for sequences ~ N(0, S) with S
+    diagonal in (DCT-II along time) x (Sigma's eigenvectors), against a dense solve;
+    fit_prior finds each coefficient's variance."""
+    torch.manual_seed(0)
+    m = Denoiser(DenoiserConfig(width=32, depth=1, heads=2, ff=64, prior_length=4)).eval()
+    slow = torch.tensor([3.0, 1.0, 0.3, 0.1])  # a variance per frequency
+    c = torch.as_tensor(scipy.fft.dct(np.eye(4), norm="ortho", axis=0)).float()
+    spatial = torch.randn(20_000, 4, 204) * torch.linspace(0.05, 1.0, 204)
+    seqs = (c.T @ (spatial * slow.sqrt()[:, None])).reshape(-1, 4, 68, 3)
+    m.fit_prior(seqs)
+    # the fitted spectrum: the frequencies' variances, summed over components
+    ratio = m.prior_spectrum.sum(1) / m.prior_spectrum.sum(1)[0]
+    torch.testing.assert_close(ratio, slow / slow[0], atol=0.02, rtol=0.03)
+    xt = torch.randn(3, 4, 68, 3)
+    for t in (10, 300, 1500):
+        with torch.no_grad():
+            ours = m(xt, torch.full((3,), float(t)))
+        torch.testing.assert_close(ours.double(), _dense_gaussian_eps(m, xt, t), atol=1e-4, rtol=1e-3)
+
+
+def test_the_temporal_gaussian_reads_other_lengths_and_padded_frames():
+    torch.manual_seed(0)
+    m = Denoiser(DenoiserConfig(width=32, depth=1, heads=2, ff=64, prior_length=8)).eval()
+    m.fit_prior(torch.randn(500, 8, 68, 3) * torch.linspace(2.0, 0.2, 8)[None, :, None, None])
+    t = torch.tensor([200.0, 200.0])
+    x = torch.randn(2, 12, 68, 3)
+    mask = torch.tensor([[True] * 12, [True] * 8 + [False] * 4])
+    x = x * mask[:, :, None, None]
+    with torch.no_grad():
+        both = m.gaussian_eps(x, t, mask)
+        alone = m.gaussian_eps(x[1:, :8], t[1:])
+    torch.testing.assert_close(both[1, :8], alone[0])  # the valid frames, as an 8-frame sequence
+    assert both[1, 8:].abs().max() == 0
+    torch.testing.assert_close(m._spectrum(8), m.prior_spectrum)
+    assert m._spectrum(12).shape == (12, 204)
+
+
+def test_the_temporal_gaussian_refuses_frames_or_other_lengths_to_fit():
+    m = Denoiser(DenoiserConfig(width=32, depth=1, heads=2, ff=64, prior_length=8))
+    with pytest.raises(ValueError, match="sequences of 8 frames"):
+        m.fit_prior(torch.randn(100, 68, 3))
+    with pytest.raises(ValueError, match="prior_length is 0"):
+        Denoiser(DenoiserConfig(width=32, depth=1, heads=2, ff=64, prior_length=1))
 
 
 @pytest.mark.parametrize("shape, t_shape, message", [

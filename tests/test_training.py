@@ -393,6 +393,21 @@ def test_the_motion_weight_reaches_the_loss_and_is_checked():
         training.DenoiserTraining(schedule="flow", prediction="u", motion_weight=2.0)
 
 
+def test_a_temporal_prior_is_fitted_to_whole_sequences_saved_and_loaded(tmp_path):
+    from facelib import tasks
+    r = _recipe(steps=2, temporal_prior=True)
+    assert r.architecture.prior_length == r.settings.num_frames
+    model = r.build(torch.Generator().manual_seed(0))
+    spectrum = model.prior_spectrum.sum(1)
+    assert spectrum[:3].min() > 5 * spectrum[-10:].max()  # motion is slow: low frequencies hold the variance
+    training.train_and_save(r, name=str(tmp_path / "d"), progress=False)
+    loaded = tasks.load_denoiser(str(tmp_path / "d")).model
+    assert loaded.config.prior_length == r.settings.num_frames
+    torch.testing.assert_close(loaded.prior_spectrum, model.prior_spectrum)
+    with pytest.raises(ValueError, match="temporal_prior fits the Gaussian to sequences of one length"):
+        training.DenoiserTraining(temporal_prior=True, num_frames=(35, 45))
+
+
 def test_a_rectified_flow_trains_on_the_same_network_and_loop_and_samples_from_its_checkpoint(tmp_path):
     from facelib import tasks
     from facelib.flow import RectifiedFlow

@@ -51,6 +51,15 @@ from ..diffusion import check_prediction, flow_alphas_bar, named_betas
 from .bit import BiT, check_sequence_input
 
 
+def dct_matrix(n, dtype=torch.float32, device=None):
+    """The orthonormal DCT-II matrix (n, n): row k is sqrt(2 / n) cos(pi (j + 1/2) k /
+    n) over frames j (row 0 scaled by 1 / sqrt(2)); its transpose inverts it."""
+    j = torch.arange(n, dtype=torch.float64)
+    c = torch.cos(torch.pi * (j[None, :] + 0.5) * j[:, None] / n) * (2.0 / n) ** 0.5
+    c[0] /= 2**0.5
+    return c.to(dtype=dtype, device=device)
+
+
 @dataclass(frozen=True)
 class DenoiserConfig:
     """Sizes of the denoiser (our choice; the paper gives none: see the denoiser chapter
@@ -63,6 +72,10 @@ class DenoiserConfig:
     ff: int = 256
     dropout: float = 0.0
     gaussian_skip: bool = True  # our addition (see the module docstring)
+    # the Gaussian's form: 0, frames drawn independently from N(0, Sigma); L > 0, whole
+    # sequences, with a variance per temporal frequency of L frames (issue 58; the
+    # module docstring).  0 for checkpoints that record none.
+    prior_length: int = 0
     num_diffusion_steps: int = 2000  # the schedule the skip needs (paper §4)
     schedule: str = "linear"
     # what the network outputs: "eps" (paper), "x0" (MDM), "v" or "u" (rectified flow);
@@ -98,6 +111,16 @@ class Denoiser(BiT):
         self.register_buffer("prior_basis", torch.eye(features))
         # eigenvalues of Sigma
         self.register_buffer("prior_variances", torch.ones(features))
+        if c.prior_length:
+            if c.prior_length < 2:
+                raise ValueError(
+                    "prior_length is 0 (frames independent) or a sequence length of 2"
+                    f" or more frames, got {c.prior_length}"
+                )
+            # the variance of each (temporal frequency, principal component) pair
+            self.register_buffer(
+                "prior_spectrum", torch.ones(c.prior_length, features)
+            )
         # the label's token; index num_classes is "no label" (the unconditional model)
         if c.num_classes:
             self.label_embedding = nn.Embedding(c.num_classes + 1, c.width)
@@ -109,13 +132,27 @@ class Denoiser(BiT):
 
     @torch.no_grad()
     def fit_prior(self, frames):
-        """Set Sigma from normalised training frames (N, 68, 3): the Gaussian part of
-        the estimate."""
-        x = torch.as_tensor(frames, dtype=torch.float64).reshape(len(frames), -1)
-        cov = torch.cov(x.T)
+        """Set the Gaussian part of the estimate from normalised training data: frames
+        (N, 68, 3) give Sigma, their covariance; a denoiser with ``prior_length`` L
+        takes sequences (N, L, 68, 3) instead, whose frames give Sigma's eigenvectors
+        and whose DCT-II coefficients along time, in that basis, give the variance of
+        each (frequency, component) pair (the module docstring)."""
+        x = torch.as_tensor(frames, dtype=torch.float64)
+        length = self.config.prior_length
+        if length and tuple(x.shape[1:2]) != (length,):
+            raise ValueError(
+                f"this denoiser's Gaussian is over sequences of {length} frames: give"
+                f" (N, {length}, 68, 3) training sequences, got {tuple(x.shape)}"
+            )
+        cov = torch.cov(x.reshape(-1, len(self.prior_basis)).T)
         variances, basis = torch.linalg.eigh(cov)
         self.prior_basis.copy_(basis.float())
         self.prior_variances.copy_(variances.clamp_min(0).float())
+        if length:
+            y = dct_matrix(length, torch.float64) @ (
+                x.reshape(len(x), length, -1) @ basis
+            )
+            self.prior_spectrum.copy_((y**2).mean(0).float())
 
     def _abar(self, t, xt):
         """abar_t for time labels t (B,), shaped (B, 1, 1, 1) on x_t's device (the flow
@@ -155,24 +192,67 @@ class Denoiser(BiT):
             return eps - x0
         return eps
 
-    def gaussian_eps(self, xt, t):
-        """E[eps | x_t] if every frame were drawn from N(0, Sigma):
-        a per-frame linear filter."""
-        abar = self._abar(t, xt)[..., 0]
-        y = xt.reshape(xt.shape[0], xt.shape[1], -1) @ self.prior_basis
-        y = y * (1 - abar).sqrt() / (abar * self.prior_variances + 1 - abar)
-        return (y @ self.prior_basis.T).reshape(xt.shape)
+    def gaussian_eps(self, xt, t, mask=None):
+        """E[eps | x_t] if every frame were drawn from N(0, Sigma) (a per-frame linear
+        filter), or, with ``prior_length``, every sequence from the Gaussian of its
+        temporal spectrum (a filter per frequency and component): either way
+        sqrt(1 - abar_t) (abar_t Sigma + (1 - abar_t) I)^-1 x_t, in the basis where
+        the Gaussian's covariance is diagonal."""
+        return self._prior_filter(
+            xt, t, mask, lambda abar, var: (1 - abar).sqrt() / (abar * var + 1 - abar)
+        )
 
-    def gaussian_u(self, xt, t):
-        """E[eps - x_0 | x_t] if every frame were drawn from N(0, Sigma): the Gaussian
+    def gaussian_u(self, xt, t, mask=None):
+        """E[eps - x_0 | x_t] under the Gaussian of :meth:`gaussian_eps`: the Gaussian
         estimate as a rectified-flow velocity, finite at abar = 0 where x_0 cannot be
         had from eps (E[x_0 | x_t] = sqrt(abar) Sigma (abar Sigma + (1 - abar) I)^-1
         x_t)."""
-        abar = self._abar(t, xt)[..., 0]
+        return self._prior_filter(
+            xt,
+            t,
+            mask,
+            lambda abar, var: ((1 - abar).sqrt() - abar.sqrt() * var)
+            / (abar * var + 1 - abar),
+        )
+
+    def _prior_filter(self, xt, t, mask, gain):
+        """x_t (B, F, 68, 3) multiplied, coefficient by coefficient in the Gaussian's
+        eigenbasis, by gain(abar_t, variance): per frame in Sigma's eigenvectors, or,
+        with ``prior_length`` L, on the DCT-II along time of each sequence's valid
+        frames (``mask``, None: all) too, the variances of another length F read off
+        the fitted spectrum at the same frequency k / (2 F) (linear in log-variance)."""
+        abar = self._abar(t, xt)[..., 0]  # (B, 1, 1)
         y = xt.reshape(xt.shape[0], xt.shape[1], -1) @ self.prior_basis
-        y = y * ((1 - abar).sqrt() - abar.sqrt() * self.prior_variances)
-        y = y / (abar * self.prior_variances + 1 - abar)
-        return (y @ self.prior_basis.T).reshape(xt.shape)
+        if not self.config.prior_length:
+            y = y * gain(abar, self.prior_variances)
+            return (y @ self.prior_basis.T).reshape(xt.shape)
+        lengths = (
+            torch.full((len(xt),), xt.shape[1], device=xt.device)
+            if mask is None
+            else mask.sum(1)
+        )
+        filtered = torch.zeros_like(y)
+        for n in lengths.unique().tolist():
+            rows = (lengths == n).nonzero()[:, 0]
+            c = dct_matrix(n, y.dtype, y.device)
+            z = c @ y[rows, :n]
+            z = z * gain(abar[rows], self._spectrum(n))
+            filtered[rows, :n] = c.T @ z
+        return (filtered @ self.prior_basis.T).reshape(xt.shape)
+
+    def _spectrum(self, n):
+        """The fitted variances (n, 204) of an n-frame sequence's DCT-II coefficients:
+        the fitted ones at n = prior_length, else interpolated at the same frequency."""
+        spectrum = self.prior_spectrum
+        length = len(spectrum)
+        if n == length:
+            return spectrum
+        position = torch.arange(n, device=spectrum.device) * (length / n)
+        low = position.floor().long().clamp(max=length - 1)
+        high = (low + 1).clamp(max=length - 1)
+        w = (position - low)[:, None]
+        log = spectrum.clamp_min(1e-12).log()
+        return ((1 - w) * log[low] + w * log[high]).exp()
 
     def forward(self, xt, t, mask=None, labels=None, known=None):
         """Noise estimate for x_t at steps t; ``mask`` (B, F) bool marks the valid
@@ -257,10 +337,10 @@ class Denoiser(BiT):
         # the network's estimate of its target (config.prediction)
         output = self.out(tokens).reshape(xt.shape)
         if self.config.gaussian_skip and self.config.prediction == "u":
-            output = output + self.gaussian_u(xt, t.to(xt.device))
+            output = output + self.gaussian_u(xt, t.to(xt.device), mask)
         elif self.config.gaussian_skip:
             output = output + self.from_eps(
-                xt, t, self.gaussian_eps(xt, t.to(xt.device))
+                xt, t, self.gaussian_eps(xt, t.to(xt.device), mask)
             )
         return output
 

@@ -185,6 +185,7 @@ class DenoiserRecipe(Recipe):
             prediction=settings.prediction,
             num_classes=len(train.label_names) * settings.conditional,
             known_input=settings.known_frames > 0,
+            prior_length=settings.num_frames if settings.temporal_prior else 0,
         )
         a = self.architecture
         if (a.num_diffusion_steps, a.schedule, a.prediction) != (
@@ -295,15 +296,19 @@ class DenoiserRecipe(Recipe):
             self.settings.anatomy_swap,
             Draws(generator, self.size),
         )
-        model.fit_prior(
-            torch.cat(
-                [
-                    seqs[i, :n]
-                    for seqs in (self.x_all, swapped)
-                    for i, n in enumerate(self.lengths)
-                ]
+        if model.config.prior_length:
+            # one length: whole sequences
+            model.fit_prior(torch.cat([self.x_all, swapped]))
+        else:
+            model.fit_prior(
+                torch.cat(
+                    [
+                        seqs[i, :n]
+                        for seqs in (self.x_all, swapped)
+                        for i, n in enumerate(self.lengths)
+                    ]
+                )
             )
-        )
         if self.settings.start_from is not None:
             self._start_from(model, self.settings.start_from)
         return model

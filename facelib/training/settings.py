@@ -125,6 +125,10 @@ class DenoiserTraining(Optimisation):
     # paper: 1 (the simple loss); > 1 weighs the error in what moves over the error in
     # the static anatomy (diffusion.motion_weighted)
     motion_weight: float = 1.0
+    # issue 58 (chapter 03, section 8): the Gaussian part of the estimate over whole
+    # sequences, a variance per temporal frequency (models/denoiser.py, prior_length);
+    # False: frames independent, as every denoiser shipped before it
+    temporal_prior: bool = True
     # our option: probability that a training sequence is mirrored left to right
     mirror: float = 0.0
     # our choice: training faces of these datasets (9 + 81)
@@ -165,6 +169,12 @@ class DenoiserTraining(Optimisation):
                 f" {self.start_from!r}"
             )
         check_probability("anatomy_swap", self.anatomy_swap)
+        if self.temporal_prior and not isinstance(self.num_frames, int):
+            raise ValueError(
+                "temporal_prior fits the Gaussian to sequences of one length: train on"
+                f" one length (num_frames an int), not on lengths {self.num_frames},"
+                " or set temporal_prior=False (a Gaussian per frame)"
+            )
         check_probability(
             "condition_dropout", self.condition_dropout, include_one=False
         )

@@ -15,9 +15,14 @@ from ..deformation import METHODS as DEFORMER_METHODS, SPLITS as DEFORMER_SPLITS
 
 SHIPPED = {
     "denoiser_coma": ("denoiser", {}),
-    "denoiser_bu": ("denoiser", {"dataset": "bu"}),
-    "denoiser_coma+bu": ("denoiser", {"dataset": "coma+bu"}),
-    "denoiser_coma_var": ("denoiser", {"num_frames": (35, 45)}),
+    # issue 58: not yet retrained with the temporal prior (frames independent)
+    "denoiser_bu": ("denoiser", {"dataset": "bu", "temporal_prior": False}),
+    "denoiser_coma+bu": ("denoiser", {"dataset": "coma+bu", "temporal_prior": False}),
+    # mixed lengths: one Gaussian per frame (temporal_prior needs one length)
+    "denoiser_coma_var": (
+        "denoiser",
+        {"num_frames": (35, 45), "temporal_prior": False},
+    ),
     "guide_coma_I": ("guide", {}),
     "guide_coma_S": ("guide", {"classifier_type": "S"}),
     "guide_bu_I": ("guide", {"dataset": "bu"}),
@@ -53,13 +58,16 @@ SHIPPED = {
     },
     # Issue 27: the label-conditional denoiser of classifier-free guidance
     # (tasks.label_control(guidance="cfg")).
-    "denoiser_coma_cfg": ("denoiser", {"conditional": True}),
+    "denoiser_coma_cfg": ("denoiser", {"conditional": True, "temporal_prior": False}),
     # Issue 28: the noisy AU-intensity regressor of AU-curve control (the fine-control
     # chapter).
     "au_regressor_coma": ("au_regressor", {}),
     # Issue 46: the rectified flow on the same network, data, steps and batch as
     # denoiser_coma (sampler "flow")
-    "denoiser_coma_flow": ("denoiser", {"schedule": "flow", "prediction": "u"}),
+    "denoiser_coma_flow": (
+        "denoiser",
+        {"schedule": "flow", "prediction": "u", "temporal_prior": False},
+    ),
     # Issue 47: the join denoiser of long sequences (join "learned"), fine-tuned from
     # denoiser_coma with known first frames as input (CondMDI, Cohan et al. 2024)
     "denoiser_coma_join": (
