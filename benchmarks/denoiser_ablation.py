@@ -4,8 +4,8 @@ training (issues 43 and 58).
 Usage: python benchmarks/denoiser_ablation.py [--dataset coma] [--steps 6000] [--only
 NAME ...] [--train-only] [--sample-steps 500] [--n 64] [--seeds 0 1 2 3 4] [--save NAME]
 
-Each row trains the shipped denoiser's recipe (facelib/training/settings.py,
-DenoiserTraining) with one change, at a reduced budget (``--steps``, a quarter of the
+Each row trains the denoiser's recipe as it was before issue 58 (facelib/training/
+settings.py, DenoiserTraining with a Gaussian part per frame, BEFORE) with one change, at a reduced budget (``--steps``, a quarter of the
 recipe's), into the cache (``<cache>/denoiser_ablation/<dataset>_<steps>_NAME``; a
 finished run is reused, a stopped one resumed), then measures it with the population
 protocol of the evaluation chapter (evaluation.population_gap): ``--n`` unconditional
@@ -26,7 +26,9 @@ nothing that is done:
     OMP_NUM_THREADS=1 python benchmarks/denoiser_ablation.py --train-only --only motion_weight dropout &
     python benchmarks/denoiser_ablation.py --save denoiser_ablation   # about 2.5 h on 2 cores
 
-The x4 row is the shipped checkpoint (copied, not retrained); x8 (48,000 steps), the
+A row whose recipe is a shipped checkpoint's is that checkpoint (copied, not retrained:
+temporal_prior_x4 is denoiser_coma's recipe, x4 the one shipped before it); x8
+(48,000 steps), the
 other targets, schedules and sizes of issue 43 and weight decay run with --only.
 """
 
@@ -38,15 +40,20 @@ import time
 from pathlib import Path
 
 import numpy as np
+import torch
 
 from facelib import config, data, evaluation, metrics, results, tasks, training
 from facelib.checkpoints import checkpoint_paths
 from facelib.models.denoiser import DenoiserConfig
 
+# every row but the temporal prior's changes the recipe as it was before issue 58, whose
+# Gaussian part treats frames independently
+BEFORE = {"temporal_prior": False}
 # name -> (what it changes, DenoiserTraining settings, DenoiserConfig changes)
 VARIANTS = {
     "baseline": (
-        "none: the recipe (eps, linear, uniform weighting, 128 x 4, EMA 0.999)",
+        "none: the recipe before issue 58 (eps, linear, uniform weighting, 128 x 4, EMA"
+        " 0.999, a Gaussian part per frame)",
         {},
         {},
     ),
@@ -58,7 +65,7 @@ VARIANTS = {
     "mirror": ("left-right mirroring, p = 0.5", {"mirror": 0.5}, {}),
     "wide": ("width 192, feed-forward 384", {}, {"width": 192, "ff": 384}),
     "deep": ("depth 6", {}, {"depth": 6}),
-    "x4": ("4x the steps (the shipped recipe)", {"steps_factor": 4}, {}),
+    "x4": ("4x the steps (the recipe shipped before issue 58)", {"steps_factor": 4}, {}),
     "x8": ("8x the steps", {"steps_factor": 8}, {}),
     # issue 58: data and regularisation, representation
     "crowd": (
@@ -82,6 +89,11 @@ VARIANTS = {
         {"temporal_prior": True},
         {},
     ),
+    "temporal_prior_x4": (
+        "the temporal prior and 4x the steps (the shipped recipe)",
+        {"temporal_prior": True, "steps_factor": 4},
+        {},
+    ),
     "weight_decay": ("weight decay 0.05 (AdamW)", {"weight_decay": 0.05}, {}),
 }
 # the stored table's rows (issue 58); the other VARIANTS (issue 43's) run with --only
@@ -92,6 +104,8 @@ TABLE_ROWS = (
     "world_faces",
     "motion_weight",
     "dropout",
+    "temporal_prior",
+    "temporal_prior_x4",
 )
 REGIONS = metrics.AMPLITUDE_REGIONS
 READERS = evaluation.ARCHITECTURES
@@ -131,7 +145,7 @@ def recipe_for(name, dataset, steps):
     """The recipe of row ``name``: the shipped denoiser's with the row's change, for
     ``steps`` steps."""
     _, settings, architecture = VARIANTS[name]
-    settings = dict(settings)
+    settings = {**BEFORE, **settings}
     steps *= settings.pop("steps_factor", 1)
     chosen = training.settings_for(
         "denoiser", **{"dataset": dataset, "steps": steps, **settings}
@@ -203,6 +217,14 @@ def main():
     )
     parser.add_argument("--n", type=int, default=64, help="samples per seed")
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
+    parser.add_argument(
+        "--renoise",
+        type=int,
+        default=0,
+        metavar="N",
+        help="also hand N sequences of new people to each row's chain at the steps"
+        " of RENOISE_TIMES (stored as NAME_renoise; 0: not)",
+    )
     results.add_save_options(parser)
     args = parser.parse_args()
     results.check_save_args(args)
@@ -251,7 +273,8 @@ def main():
             rows,
             run,
             notes=(
-                f"each row: the shipped recipe with one change, {args.steps} steps (x4,"
+                f"each row: the recipe before issue 58 (a Gaussian part per frame) with"
+                f" one change, {args.steps} steps (x4,"
                 f" x8: 4 and 8 times as many), batch 64, seed 0; {args.n} samples for"
                 f" each of the seeds {args.seeds} pooled, at {args.sample_steps}"
                 " respaced steps. Amplitude gaps: generated minus the reference"
@@ -281,6 +304,115 @@ def main():
             ),
         )
         print(f"saved {path}")
+    if args.renoise:
+        people = splits["new people"]
+        chained = [
+            r
+            for name in names
+            for r in renoised(name, stems[name], people, args.renoise,
+                              args.sample_steps)
+        ]
+        for r in chained:
+            print(json.dumps(r), flush=True)
+        if args.save:
+            path = results.save_result(
+                args.save + "_renoise",
+                f"Where along the chain the amplitude is lost ({args.dataset}): new"
+                " people's sequences handed to each row's chain at step t",
+                RENOISE_COLUMNS,
+                chained,
+                run,
+                notes=(
+                    f"{args.renoise} sequences of the reference population noised to"
+                    " x_t (Eq. 6) and denoised by the rest of the chain"
+                    f" ({args.sample_steps} respaced steps; t the nearest step's"
+                    " paper step); mouth-opening gaps against the whole population,"
+                    " 95 % intervals by metrics.population_gap. Slow variance: the"
+                    " variance over sequences of each coordinate's mean over the"
+                    f" frames, summed, less the noise's, in {args.renoise} chains run"
+                    " from x_T, over the same for the people's x_t"
+                ),
+            )
+            print(f"saved {path}")
+
+
+# the paper steps t at which real sequences are handed to a row's chain (--renoise)
+RENOISE_TIMES = (200, 400, 800, 1200, 1600, 2000)
+RENOISE_COLUMNS = [
+    "row",
+    "t",
+    "abar_t",
+    "mouth opening p50 gap (mm)",
+    "95 % interval",
+    "mouth opening p90 gap (mm)",
+    "95 % interval",
+    "slow variance of x_t, generated / people's",
+]
+
+
+@torch.no_grad()
+def renoised(name, stem, people, n, sample_steps, seed=0):
+    """Where along the chain a row's amplitude is lost: rows of RENOISE_COLUMNS.
+
+    For each t of RENOISE_TIMES (the chain's nearest step), ``n`` sequences of the
+    reference population are noised to x_t (Eq. 6) and the rest of the chain is run
+    from there (SDEdit); their mouth openings' median and 90th percentile minus the
+    population's, with intervals (metrics.population_gap).  A chain that reproduces
+    the data keeps the people's amplitudes from every t.  Beside it, how much of the
+    sequences' slowest part the chain itself has built by t: the variance over samples
+    of each coordinate's mean over the frames, beyond the noise's own, in ``n`` chains
+    run from x_T, over the same in the people's x_t (None where the people's stands
+    less than 5 standard errors of the noise's above it, t >= about 1200)."""
+    denoiser = tasks.load_denoiser(str(stem))
+    chain = denoiser.chain_for(tasks.Unconditional(steps=sample_steps))
+    keep = np.random.default_rng(seed).choice(len(people), n, replace=False)
+    x0 = torch.as_tensor(denoiser.to_model(people.landmarks[keep])).float()
+    steps = {
+        t: int(np.abs(np.asarray(chain.timesteps[1:]) - t).argmin()) + 1
+        for t in RENOISE_TIMES
+    }
+    recorded = {}
+
+    def record(k, x, out):  # x is x_{k-1}: the chain's state at step k - 1
+        if k - 1 in steps.values():
+            recorded[k - 1] = x.clone()
+
+    generator = torch.Generator().manual_seed(seed)
+    chain.sample(denoiser.model, tuple(x0.shape), seed=seed + 1, callback=record,
+                 progress=False)
+    reference = metrics.amplitudes(people.landmarks)["mouth opening"]
+    rows = []
+    for t, k in steps.items():
+        abar = float(chain.alphas_bar[k - 1])
+        noise = torch.randn(x0.shape, generator=generator)
+        xt = abar**0.5 * x0 + (1 - abar) ** 0.5 * noise
+        out = chain.run(denoiser.model, xt, seed=seed + 2,
+                        steps=chain.schedule(start=k), progress=False)
+        mouth = metrics.amplitudes(denoiser.to_mm(out))["mouth opening"]
+        gaps = [
+            metrics.population_gap(mouth, reference, people.subjects,
+                                   lambda v, q=q: np.percentile(v, q), seed=seed)
+            for q in evaluation.POPULATION_PERCENTILES
+        ]
+        frames = x0.shape[1]
+        noise = (1 - abar) * x0[0, 0].numel() / frames  # the noise's share, summed
+
+        def slow(x):  # the means over the frames' variance, beyond the noise's
+            return float(x.double().mean(1).var(0).sum()) - noise
+
+        # only where the people's slow part stands out of the noise's sampling spread
+        generated, real = recorded.get(k), slow(xt)
+        ratio = (
+            None
+            if generated is None or real < 5 * noise * (2 / n) ** 0.5
+            else slow(generated) / real
+        )
+        rows.append(
+            [name, int(chain.timesteps[k]), abar]
+            + [v for gap, interval in gaps for v in (float(gap), list(interval))]
+            + [ratio]
+        )
+    return rows
 
 
 def measured(name, stem, args, splits):
@@ -294,7 +426,8 @@ def measured(name, stem, args, splits):
            "sample_steps": args.sample_steps}
     cache = Path(str(stem) + ".row.json")
     if cache.exists() and json.loads(cache.read_text())["key"] == key:
-        return json.loads(cache.read_text())["row"], meta
+        row = json.loads(cache.read_text())["row"]
+        return [name, VARIANTS[name][0], *row[2:]], meta  # the change as described now
     t0 = time.perf_counter()
     x = np.concatenate(
         [

@@ -23,7 +23,9 @@ per_label: the command line's label control (tasks.LabelControl: its steps, guid
 and rate), n
     sequences per label, against the test split's sequences of that label, both read by
     the IC: accuracy per label with 95 % intervals (does guidance reach every label, the
-    rare and subtle ones too?).
+    rare and subtle ones too?); and, where the dataset has a reference population
+    (issue 58), each reader's accuracy minus the population's on its sequences of the
+    label, with an interval that resamples the people.
 --save NAME writes the table to results/NAME.json (facelib.results: provenance,
   checkpoint hashes).
 """
@@ -189,6 +191,13 @@ def per_label_experiment(args, name, ev, guide, denoiser):
     settings = tasks.LabelControl(dataset=name)
     test = data.load_dataset(name, "test")
     test_targets = test.targets("I")
+    # issue 58: both readers, against the reference population's sequences of the label
+    population = config.REFERENCE_POPULATIONS.get(name)
+    people = None if population is None else data.load_dataset(population, "test")
+    readers = {
+        r: evaluation.load_evaluator(name, "I", reader=r)
+        for r in evaluation.ARCHITECTURES
+    }
     rows = []
     for k, label in enumerate(ev.class_names):
         t0 = time.perf_counter()
@@ -211,12 +220,38 @@ def per_label_experiment(args, name, ev, guide, denoiser):
                 [max(float(low), 0.0), min(float(high), 100.0)],
                 len(seqs),
             ]
+        if people is not None:
+            theirs = people.targets("I") == k
+            for reader in readers.values():
+                mine = 100.0 * (reader.features(x).argmax(1) == k)
+                ref = 100.0 * (reader.features(people.landmarks[theirs]).argmax(1) == k)
+                gap, interval = metrics.population_gap(
+                    mine, ref, people.subjects[theirs], np.mean, seed=0
+                )
+                cells += [float(mine.mean()), float(ref.mean()), float(gap),
+                          list(interval)]
         rows.append([name, label, *cells, round(dt, 1)])
         print(
             f"{label:>14}{cells[0]:>8.1f} [{cells[1][0]:5.1f}, {cells[1][1]:5.1f}] "
-            f" test{cells[3]:>8.1f} ({cells[5]} seqs){dt:>8.1f} s",
+            f" test{cells[3]:>8.1f} ({cells[5]} seqs)"
+            + "".join(
+                f"  {r} {cells[6 + 4 * i + 2]:+6.1f} [{cells[6 + 4 * i + 3][0]:+6.1f},"
+                f" {cells[6 + 4 * i + 3][1]:+6.1f}]"
+                for i, r in enumerate(readers) if people is not None
+            )
+            + f"{dt:>8.1f} s",
             flush=True,
         )
+    by_reference = [
+        c
+        for r in readers
+        for c in (
+            f"Acc (%) ({r})",
+            f"people's Acc (%) ({r})",
+            f"gap (points) ({r})",
+            "gap 95 % interval",
+        )
+    ]
     return [
         "dataset",
         "label",
@@ -226,6 +261,7 @@ def per_label_experiment(args, name, ev, guide, denoiser):
         "test Acc (%)",
         "test 95 % interval",
         "test n",
+        *(by_reference if people is not None else []),
         "time (s)",
     ], rows
 
@@ -316,6 +352,8 @@ def main():
         columns, new = experiment(args, name, ev, guide, denoiser)
         rows += new
         checkpoints += [f"denoiser_{name}", f"ic_{name}_I", f"guide_{name}_I"]
+        if args.experiment == "per_label" and name in config.REFERENCE_POPULATIONS:
+            checkpoints += [f"ic_{name}_I_cnn"]
         if args.experiment == "table1":
             checkpoints += [f"{b}_{name}" for b in baselines.LABEL_BASELINES]
     if args.save:
