@@ -7,6 +7,7 @@ facelib/training/settings.py, registration.Registration)."""
 from __future__ import annotations
 
 import argparse
+import functools
 import typing
 from dataclasses import field, fields
 
@@ -41,9 +42,16 @@ def shown(value):
 def field_type(cls, name):
     """(type, optional) of the field ``name`` of the dataclass ``cls``, read from its
     annotation: ``int | None`` -> (int, True), ``float`` -> (float, False)."""
-    hint = typing.get_type_hints(cls)[name]
+    hint = _type_hints(cls)[name]
     args = [a for a in typing.get_args(hint) if a is not type(None)]
     return (args[0] if args else hint), type(None) in typing.get_args(hint)
+
+
+@functools.cache
+def _type_hints(cls):
+    """typing.get_type_hints(cls), read once per class (the annotations are strings,
+    evaluated on every call: most of the command line's start-up)."""
+    return typing.get_type_hints(cls)
 
 
 def converter(base, optional, name):
