@@ -2,11 +2,12 @@
 training (issues 43 and 58).
 
 Usage: python benchmarks/denoiser_ablation.py [--dataset coma] [--steps 6000] [--only
-NAME ...] [--train-only] [--sample-steps 500] [--n 64] [--seeds 0 1 2 3 4] [--save NAME]
+NAME ...] [--train-only] [--sample-steps 500] [--n 64] [--seeds 0 1 2 3 4] [--renoise N
+[--renoise-rows NAME ...]] [--save NAME]
 
-Each row trains the denoiser's recipe as it was before issue 58 (facelib/training/
-settings.py, DenoiserTraining with a Gaussian part per frame, BEFORE) with one change, at a reduced budget (``--steps``, a quarter of the
-recipe's), into the cache (``<cache>/denoiser_ablation/<dataset>_<steps>_NAME``; a
+Each row trains the denoiser's recipe as it was before issue 58 (DenoiserTraining with
+a Gaussian part per frame: BEFORE) with one change, at a reduced budget (``--steps``, a
+quarter of the recipe's), into the cache (``<cache>/denoiser_ablation/<dataset>_<steps>_NAME``; a
 finished run is reused, a stopped one resumed), then measures it with the population
 protocol of the evaluation chapter (evaluation.population_gap): ``--n`` unconditional
 samples for each of ``--seeds`` pooled, at the command line's default
@@ -16,7 +17,8 @@ the label mix by both readers beside real sets' 95th percentile; the denoising l
 t = 200 on the training split, on new takes of its people and on new people
 (evaluation.denoising_loss); and the training's wall time.  The held-out losses per
 noise-level bucket (recipes.DenoiserRecipe.validate, every 500 steps) go to a second
-table, NAME_curves.
+table, NAME_curves; with ``--renoise N``, where along the chain each of
+``--renoise-rows`` loses the amplitude (:func:`renoised`) to a third, NAME_renoise.
 
 Training runs can be spread over processes (each with OMP_NUM_THREADS=1) with --only and
 --train-only; a run with --save measures the rows named (all without --only) and trains
@@ -222,8 +224,15 @@ def main():
         type=int,
         default=0,
         metavar="N",
-        help="also hand N sequences of new people to each row's chain at the steps"
-        " of RENOISE_TIMES (stored as NAME_renoise; 0: not)",
+        help="also hand N sequences of new people to the chains of --renoise-rows at"
+        " the steps of RENOISE_TIMES (stored as NAME_renoise; 0: not)",
+    )
+    parser.add_argument(
+        "--renoise-rows",
+        nargs="+",
+        choices=list(VARIANTS),
+        default=["x4", "temporal_prior_x4"],
+        help="the rows --renoise measures (default: the two full-length recipes)",
     )
     results.add_save_options(parser)
     args = parser.parse_args()
@@ -308,9 +317,9 @@ def main():
         people = splits["new people"]
         chained = [
             r
-            for name in names
-            for r in renoised(name, stems[name], people, args.renoise,
-                              args.sample_steps)
+            for name in args.renoise_rows
+            for r in renoised(name, trained(name, args.dataset, args.steps), people,
+                              args.renoise, args.sample_steps)
         ]
         for r in chained:
             print(json.dumps(r), flush=True)

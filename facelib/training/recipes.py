@@ -197,6 +197,12 @@ class DenoiserRecipe(Recipe):
                 "the denoiser's schedule and prediction target must match the training"
                 " settings'"
             )
+        if a.prior_length != (settings.num_frames if settings.temporal_prior else 0):
+            raise ValueError(
+                f"the denoiser's prior_length ({a.prior_length}) must be the training"
+                " settings' num_frames with temporal_prior, 0 without (temporal_prior ="
+                f" {settings.temporal_prior}, num_frames = {settings.num_frames})"
+            )
         self.name = f"denoiser ({settings.dataset})"
         self.variable = not isinstance(settings.num_frames, int)
         self.labels, self.label_names = torch.as_tensor(train.labels), list(
@@ -457,8 +463,12 @@ class DistillationRecipe(Recipe):
                     f.name: _as_setting(recorded[f.name])
                     for f in fields(DenoiserTraining)
                     if f.name in recorded
-                    and f.name not in ("steps", "warmup", "prediction")
-                }
+                    and f.name
+                    not in ("steps", "warmup", "prediction", "temporal_prior")
+                },
+                # the teacher's own Gaussian (a checkpoint from before the setting
+                # records none)
+                temporal_prior=bool(self.teacher.model.config.prior_length),
             )
         )
         self.distilled_from = recorded.get(
