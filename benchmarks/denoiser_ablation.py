@@ -91,6 +91,11 @@ VARIANTS = {
         {"temporal_prior": True},
         {},
     ),
+    "temporal_prior_v": (
+        "the temporal prior, the network predicting v (Salimans & Ho 2022)",
+        {"temporal_prior": True, "prediction": "v"},
+        {},
+    ),
     "temporal_prior_x4": (
         "the temporal prior and 4x the steps (the shipped recipe)",
         {"temporal_prior": True, "steps_factor": 4},
