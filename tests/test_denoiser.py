@@ -114,6 +114,33 @@ def test_the_temporal_gaussian_reads_other_lengths_and_padded_frames():
     assert m._spectrum(12).shape == (12, 204)
 
 
+def _performances(n, frames, seed):
+    """n sequences (n, frames, 68, 3) of one slow motion per sequence on the time axis
+    [0, 1], sampled at ``frames`` frames, plus white noise: the same performances at
+    any length."""
+    g = torch.Generator().manual_seed(seed)
+    amplitude = torch.randn(n, 3, 204, generator=g) * torch.tensor([3.0, 1.0, 0.3])[None, :, None]
+    u = (torch.arange(frames) + 0.5) / frames
+    waves = torch.stack([torch.cos(torch.pi * k * u) for k in range(3)])  # (3, frames)
+    x = torch.einsum("nkd,kf->nfd", amplitude, waves) + 0.1 * torch.randn(n, frames, 204, generator=g)
+    return x.reshape(n, frames, 68, 3)
+
+
+def test_the_temporal_gaussian_at_another_length_is_the_one_fitted_there():
+    """A sequence of another length is the same performance at a finer or coarser time
+    step: the spectrum read off at 12 or 30 frames is the one fitted on sequences of
+    that length (the slow frequencies, which hold the variance, and the white floor)."""
+    fitted = {}
+    for frames in (12, 20, 30):
+        m = Denoiser(DenoiserConfig(width=32, depth=1, heads=2, ff=64, prior_length=frames))
+        m.fit_prior(_performances(4000, frames, seed=frames))
+        fitted[frames] = m
+    for frames in (12, 30):
+        read, true = fitted[20]._spectrum(frames).sum(1), fitted[frames].prior_spectrum.sum(1)
+        torch.testing.assert_close(read[:3], true[:3], rtol=0.1, atol=0)
+        torch.testing.assert_close(read[-3:], true[-3:], rtol=0.2, atol=0)
+
+
 def test_the_temporal_gaussian_refuses_frames_or_other_lengths_to_fit():
     m = Denoiser(DenoiserConfig(width=32, depth=1, heads=2, ff=64, prior_length=8))
     with pytest.raises(ValueError, match="sequences of 8 frames"):

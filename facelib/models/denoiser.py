@@ -219,8 +219,8 @@ class Denoiser(BiT):
         """x_t (B, F, 68, 3) multiplied, coefficient by coefficient in the Gaussian's
         eigenbasis, by gain(abar_t, variance): per frame in Sigma's eigenvectors, or,
         with ``prior_length`` L, on the DCT-II along time of each sequence's valid
-        frames (``mask``, None: all) too, the variances of another length F read off
-        the fitted spectrum at the same frequency k / (2 F) (linear in log-variance)."""
+        frames (``mask``, None: all) too, the variances of another length from the
+        fitted ones (:meth:`_spectrum`)."""
         abar = self._abar(t, xt)[..., 0]  # (B, 1, 1)
         y = xt.reshape(xt.shape[0], xt.shape[1], -1) @ self.prior_basis
         if not self.config.prior_length:
@@ -241,18 +241,19 @@ class Denoiser(BiT):
         return (filtered @ self.prior_basis.T).reshape(xt.shape)
 
     def _spectrum(self, n):
-        """The fitted variances (n, 204) of an n-frame sequence's DCT-II coefficients:
-        the fitted ones at n = prior_length, else interpolated at the same frequency."""
+        """The variances (n, 204) of an n-frame sequence's DCT-II coefficients: the
+        fitted ones at n = prior_length L; at another length the same motion over n
+        frames (the world's longer sequences are the same performance at a finer
+        time step): coefficient k's variance above the white floor (the fastest
+        frequency's, per component) grows as n / L, and frequencies beyond the L
+        fitted ones are the floor."""
         spectrum = self.prior_spectrum
         length = len(spectrum)
         if n == length:
             return spectrum
-        position = torch.arange(n, device=spectrum.device) * (length / n)
-        low = position.floor().long().clamp(max=length - 1)
-        high = (low + 1).clamp(max=length - 1)
-        w = (position - low)[:, None]
-        log = spectrum.clamp_min(1e-12).log()
-        return ((1 - w) * log[low] + w * log[high]).exp()
+        floor = spectrum[-1:]
+        slow = floor + (spectrum[: min(n, length)] - floor) * (n / length)
+        return torch.cat([slow, floor.expand(max(n - length, 0), -1)]).clamp_min(1e-12)
 
     def forward(self, xt, t, mask=None, labels=None, known=None):
         """Noise estimate for x_t at steps t; ``mask`` (B, F) bool marks the valid
