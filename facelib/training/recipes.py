@@ -327,9 +327,15 @@ class DenoiserRecipe(Recipe):
         ours, theirs = asdict(model.config), asdict(start.config)
         differ = [k for k in ours if k != "known_input" and ours[k] != theirs.get(k)]
         if differ or (theirs.get("known_input") and not ours["known_input"]):
+            hint = (
+                f" (set temporal_prior={bool(theirs.get('prior_length'))}, as {name}"
+                " was trained)"
+                if "prior_length" in differ
+                else ""
+            )
             raise ValueError(
                 f"cannot start from {name}: its network differs from this one's in"
-                f" {differ or ['known_input']}"
+                f" {differ or ['known_input']}{hint}"
             )
         missing, unexpected = model.load_state_dict(start.state_dict(), strict=False)
         if unexpected or any(not k.startswith("known_embedding.") for k in missing):

@@ -75,6 +75,8 @@ SHIPPED = {
         {
             "known_frames": 0.75,
             "start_from": "denoiser_coma",
+            # the Gaussian of the denoiser_coma it starts from (issue 58: per frame)
+            "temporal_prior": False,
             "steps": 12_000,
             "lr": 5e-4,
             "warmup": 200,
