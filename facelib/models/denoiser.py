@@ -19,6 +19,14 @@ and the transformer learns only the residual: eps_theta = eps_gauss + BiT(TE + P
 Its output layer starts at zero, so training starts from the best linear per-frame
 denoiser.
 
+The Gaussian's form (``prior_length``; issue 58, chapter 03 section 8): frames drawn
+independently (0, every checkpoint before it) under-draw a sequence's slowest part,
+the only part x_t still holds at high noise, and the chain follows that Gaussian
+there.  With ``prior_length`` L the Gaussian is over whole sequences, diagonal in the
+DCT-II basis along time times Sigma's eigenvectors, a variance per (frequency,
+component) fitted on the training sequences; the estimate is the same formula,
+coefficient by coefficient.
+
 What the network outputs (``prediction``, an ablation of the denoiser chapter): the
 noise eps (the paper's), the clean sequence x_0 (MDM), the velocity v = sqrt(abar_t)
 eps - sqrt(1 - abar_t) x_0 (Salimans & Ho 2022) or rectified flow's velocity u = eps -
