@@ -429,8 +429,7 @@ def test_a_join_denoiser_starts_as_its_unconditional_one_and_learns_with_known_f
     # as the unconditional one whatever it is given
     from facelib import tasks
     from facelib.inpainting import KnownInput
-    recipe = training.recipe("denoiser", known_frames=0.75, start_from="denoiser_coma", steps=2,
-                             temporal_prior=False)  # denoiser_coma's Gaussian, per frame
+    recipe = training.recipe("denoiser", known_frames=0.75, start_from="denoiser_coma", steps=2)
     assert recipe.checkpoint_name() == "denoiser_coma_join" and recipe.architecture.known_input
     model, base = recipe.build(torch.Generator().manual_seed(0)), tasks.load_denoiser("denoiser_coma").model
     model.eval()  # as the loaded one (the transformer's eval path)

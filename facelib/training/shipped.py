@@ -74,16 +74,19 @@ SHIPPED = {
         "denoiser",
         {
             "known_frames": 0.75,
+            # issue 58: the shipped join was fine-tuned from the previous, per-frame
+            # denoiser_coma (it records no temporal_prior); retraining it from today's
+            # gives it the temporal Gaussian
             "start_from": "denoiser_coma",
-            # the Gaussian of the denoiser_coma it starts from (issue 58: per frame)
-            "temporal_prior": False,
             "steps": 12_000,
             "lr": 5e-4,
             "warmup": 200,
         },
     ),
     # Issue 46: progressive distillation of denoiser_coma's DDIM chain, 256 -> 128 ->
-    # ... -> 1 steps, each round's student the next round's teacher (sampler "student")
+    # ... -> 1 steps, each round's student the next round's teacher (sampler "student");
+    # issue 58: the shipped students were distilled from the previous, per-frame
+    # denoiser_coma
     **{
         f"student_denoiser_coma_{k}": (
             "student",
